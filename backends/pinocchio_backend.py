@@ -1,0 +1,160 @@
+"""Pinocchio backend: the exact static equilibrium of the same chain.
+
+For each displacement step d of the protocol it solves, by Newton's method,
+
+    K q + g(q) - J(q)^T u F = 0,        u . (p(q) - p0) = d
+
+for the joint angles q and the probe force F (u the fixed world probe
+direction, p the probe point, J its translational Jacobian). The tangent is
+exact: K + dg/dq - F d(J^T u)/dq, the last term from the closed-form Hessian
+of u . p(q) for a serial chain of revolute joints. This is the answer the
+dynamic engines must converge to. ``linear_stiffness`` is 1 / (u^T J K^-1 J^T u)
+at the rest configuration (small deflection, no gravity).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from canebench.chain import Chain
+from canebench.protocol import Protocol
+
+from .base import StaticBackend, StaticModel
+
+
+class ConvergenceError(RuntimeError):
+    pass
+
+
+def chain_to_pinocchio(chain: Chain) -> tuple[pin.Model, int]:
+    """Pinocchio model (RX then RY joint per link) and the probe frame id."""
+    model = pin.Model()
+    model.name = "cane"
+    parent = 0
+    push_joint = 0
+    for j in range(chain.n_links):
+        R, p = chain.relative_pose(j)
+        jx = model.addJoint(parent, pin.JointModelRX(), pin.SE3(R, p), f"j{j}x")
+        jy = model.addJoint(jx, pin.JointModelRY(), pin.SE3.Identity(), f"j{j}y")
+        inertia = pin.Inertia(float(chain.masses[j]), np.array([0.0, 0.0, chain.lengths[j] / 2]),
+                              np.diag(chain.inertias[j]))
+        model.appendBodyToJoint(jy, inertia, pin.SE3.Identity())
+        if j == chain.push_link:
+            push_joint = jy
+        parent = jy
+    model.gravity.linear = np.asarray(chain.gravity, float)
+    placement = pin.SE3(np.eye(3), chain.local(chain.push_link, chain.push_point))
+    fid = model.addFrame(pin.Frame("push", push_joint, placement, pin.FrameType.OP_FRAME))
+    return model, fid
+
+
+class PinocchioStatic(StaticModel):
+    def __init__(self, chain: Chain, tol_force: float = 1e-10, max_iter: int = 30) -> None:
+        self.chain = chain
+        self.model, self.fid = chain_to_pinocchio(chain)
+        self.data = self.model.createData()
+        nv = self.model.nv
+        self.K = np.repeat(chain.stiffness, 2)
+        self.u = np.asarray(chain.direction, float)
+        self.p0 = chain.push_point.copy()
+        # joints that carry the probe point: those up to the push link's RY
+        self.n_act = 2 * (chain.push_link + 1)
+        self.q = np.zeros(nv)
+        self.F = 0.0
+        self.tol_force = tol_force
+        self.max_iter = max_iter
+        self.iterations: list[int] = []
+
+    # -- kinematics
+    def _eval(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        m, d = self.model, self.data
+        pin.computeJointJacobians(m, d, q)  # also runs forward kinematics
+        pin.updateFramePlacements(m, d)
+        p = d.oMf[self.fid].translation.copy()
+        J = pin.getFrameJacobian(m, d, self.fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
+        g = pin.computeGeneralizedGravity(m, d, q)
+        dg = pin.computeGeneralizedGravityDerivatives(m, d, q)
+        return p, self.u @ J, g, dg
+
+    def _axes_origins(self) -> tuple[np.ndarray, np.ndarray]:
+        n = self.n_act
+        a = np.empty((n, 3))
+        o = np.empty((n, 3))
+        for i in range(n):
+            M = self.data.oMi[i + 1]
+            a[i] = M.rotation[:, i % 2]  # RX: local x, RY: local y
+            o[i] = M.translation
+        return a, o
+
+    def hessian_u_p(self, p: np.ndarray) -> np.ndarray:
+        """d^2 (u . p) / dq^2 for the serial revolute chain (current kinematics).
+
+        For i <= j (i ancestor of, or equal to, j) with r_j = p - o_j:
+        H_ij = u . [ (a_i x a_j) x r_j + a_j x (a_i x r_j) ].
+        """
+        a, o = self._axes_origins()
+        n = self.n_act
+        r = p[None, :] - o  # (n, 3)
+        H = np.zeros((self.model.nv, self.model.nv))
+        u = self.u
+        ai = a[:, None, :]
+        aj = a[None, :, :]
+        rj = np.broadcast_to(r[None, :, :], (n, n, 3))
+        term = np.cross(np.cross(ai, aj), rj) + np.cross(np.broadcast_to(aj, (n, n, 3)), np.cross(ai, rj))
+        h = term @ u
+        upper = np.triu(h)
+        Hn = upper + np.triu(h, 1).T
+        H[:n, :n] = Hn
+        return H
+
+    def solve(self, displacement: float) -> float:
+        q, F = self.q.copy(), self.F
+        nv = self.model.nv
+        for it in range(self.max_iter):
+            p, Ju, g, dg = self._eval(q)
+            r1 = self.K * q + g - Ju * F
+            r2 = self.u @ (p - self.p0) - displacement
+            scale = max(1.0, abs(F))
+            if np.max(np.abs(r1)) < self.tol_force * scale and abs(r2) < 1e-13:
+                self.q, self.F = q, F
+                self.iterations.append(it)
+                return float(F)
+            A = np.zeros((nv + 1, nv + 1))
+            A[:nv, :nv] = np.diag(self.K) + dg - F * self.hessian_u_p(p)
+            A[:nv, nv] = -Ju
+            A[nv, :nv] = Ju
+            dx = np.linalg.solve(A, -np.concatenate([r1, [r2]]))
+            q = q + dx[:nv]
+            F = F + dx[nv]
+            if not np.all(np.isfinite(q)):
+                break
+        raise ConvergenceError(f"Newton did not converge at displacement {displacement * 1e3:.3g} mm")
+
+    def linear_stiffness(self) -> float:
+        _, Ju, _, _ = self._eval(np.zeros(self.model.nv))
+        return float(1.0 / (Ju @ (Ju / self.K)))
+
+
+class PinocchioBackend(StaticBackend):
+    name = "pinocchio"
+    tags = ("static", "reference", "exact")
+    engine_module = "pinocchio"
+
+    def settings(self, proto: Protocol) -> dict[str, Any]:
+        return {
+            "engine": "pinocchio",
+            "version": pin.__version__,
+            "integrator": "none (static equilibrium)",
+            "solver": "Newton on K q + g(q) - J^T u F = 0 with u.(p - p0) = d, exact tangent",
+            "dt": None,
+            "springs": "exact",
+            "damping": "n/a (static)",
+            "pid": "n/a: displacement imposed exactly at each protocol step",
+            "why": "reference answer the dynamic engines must converge to",
+        }
+
+    def build(self, chain: Chain) -> PinocchioStatic:
+        return PinocchioStatic(chain)

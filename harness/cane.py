@@ -1,0 +1,237 @@
+"""Cane description: the backend-agnostic input format (spec in canes/README.md).
+
+A description is plain data. It is validated on load so that every error
+names the file and the field; nothing downstream re-checks user input.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .errors import InputError
+
+DEFAULT_DENSITY = 580.0  # kg/m^3, paper (Zhang et al.)
+DEFAULT_DAMPING = 0.15  # N m s/rad, paper (Pivato et al.)
+DORMANT_MEAN_MODULUS = 4.57e9  # Pa, paper's dormant-season mean (naive case)
+
+
+@dataclass(frozen=True)
+class Location:
+    """A place on the cane: arc length ``s`` from the base or a ``height`` (m)."""
+
+    s: float | None = None
+    height: float | None = None
+
+
+@dataclass(frozen=True)
+class Caliper:
+    """A caliper diameter (m) measured at a location."""
+
+    where: Location
+    diameter: float
+
+
+@dataclass(frozen=True)
+class PushPoint:
+    """Where and in which horizontal direction the probe pushes.
+
+    ``direction`` is the probe's azimuth as a horizontal vector; the harness
+    pitches it to be perpendicular to the cane there (as the field crew did)
+    and then applies the configured probe angle.
+    """
+
+    id: str
+    where: Location
+    direction: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    trial: str | None = None  # path of the rig CSV, relative to the YAML file
+
+
+@dataclass(frozen=True)
+class Material:
+    flexural_modulus: float = DORMANT_MEAN_MODULUS
+    density: float = DEFAULT_DENSITY
+    joint_damping: float = DEFAULT_DAMPING
+
+
+@dataclass(frozen=True)
+class CaneDescription:
+    """A blueberry cane: centreline, calipers, push points, material, provenance.
+
+    All quantities SI (m, Pa, kg/m^3, N m s/rad). ``polyline`` is base first,
+    z up; ``raw_polyline`` says whether Chaikin smoothing is still to be applied.
+    """
+
+    id: str
+    polyline: np.ndarray
+    raw_polyline: bool
+    calipers: tuple[Caliper, ...]
+    push_points: tuple[PushPoint, ...]
+    material: Material = field(default_factory=Material)
+    provenance: dict[str, Any] = field(default_factory=dict)
+    source: str = "<memory>"
+
+    def push_point(self, pid: str) -> PushPoint:
+        for p in self.push_points:
+            if p.id == str(pid):
+                return p
+        raise InputError(self.source, "push_points", f"no push point with id {pid!r}")
+
+    def trial_path(self, pid: str) -> Path | None:
+        p = self.push_point(pid)
+        if p.trial is None:
+            return None
+        return (Path(self.source).parent / p.trial).resolve()
+
+
+# ---------------------------------------------------------------- validation
+
+
+def _num(value: Any, src: str, fld: str, *, positive: bool = False, nonneg: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise InputError(src, fld, f"expected a number, got {value!r}")
+    try:
+        x = float(value)
+    except ValueError:
+        raise InputError(src, fld, f"expected a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise InputError(src, fld, f"must be finite, got {value!r}")
+    if positive and x <= 0:
+        raise InputError(src, fld, f"must be > 0, got {x!r}")
+    if nonneg and x < 0:
+        raise InputError(src, fld, f"must be >= 0, got {x!r}")
+    return x
+
+
+def _location(d: dict, src: str, fld: str) -> Location:
+    has_s, has_h = "s" in d, "height" in d
+    if has_s == has_h:
+        raise InputError(src, fld, "give exactly one of 's' (arc length, m) or 'height' (m)")
+    if has_s:
+        return Location(s=_num(d["s"], src, f"{fld}.s", nonneg=True))
+    return Location(height=_num(d["height"], src, f"{fld}.height", nonneg=True))
+
+
+def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
+    """Validate a parsed mapping and build a :class:`CaneDescription`."""
+    src = str(source)
+    if not isinstance(data, dict):
+        raise InputError(src, "<root>", "expected a mapping at the top level")
+    for key in ("id", "polyline", "calipers", "push_points"):
+        if key not in data:
+            raise InputError(src, key, "missing required field")
+    cid = str(data["id"]).strip()
+    if not cid:
+        raise InputError(src, "id", "must be a non-empty string")
+
+    poly = data["polyline"]
+    if isinstance(poly, dict):
+        raw = bool(poly.get("raw", True))
+        pts = poly.get("points")
+    else:
+        raw, pts = True, poly
+    if not isinstance(pts, list) or len(pts) < 2:
+        raise InputError(src, "polyline.points", "need a list of at least 2 [x, y, z] points")
+    arr = np.empty((len(pts), 3))
+    for i, p in enumerate(pts):
+        if not isinstance(p, (list, tuple)) or len(p) != 3:
+            raise InputError(src, f"polyline.points[{i}]", f"expected [x, y, z], got {p!r}")
+        for j in range(3):
+            arr[i, j] = _num(p[j], src, f"polyline.points[{i}][{j}]")
+    seg = np.linalg.norm(np.diff(arr, axis=0), axis=1)
+    if np.any(seg <= 1e-9):
+        i = int(np.argmax(seg <= 1e-9))
+        raise InputError(src, f"polyline.points[{i + 1}]", "coincides with the previous point (degenerate polyline)")
+    if seg.sum() < 1e-3:
+        raise InputError(src, "polyline.points", "total length below 1 mm (degenerate polyline)")
+
+    cals = data["calipers"]
+    if not isinstance(cals, list) or not cals:
+        raise InputError(src, "calipers", "need at least one {s|height, diameter} entry")
+    calipers = []
+    for i, c in enumerate(cals):
+        f = f"calipers[{i}]"
+        if not isinstance(c, dict) or "diameter" not in c:
+            raise InputError(src, f, "expected a mapping with 'diameter' and 's' or 'height'")
+        calipers.append(Caliper(_location(c, src, f), _num(c["diameter"], src, f"{f}.diameter", positive=True)))
+
+    pps = data["push_points"]
+    if not isinstance(pps, list) or not pps:
+        raise InputError(src, "push_points", "need at least one push point")
+    push_points, seen = [], set()
+    for i, p in enumerate(pps):
+        f = f"push_points[{i}]"
+        if not isinstance(p, dict) or "id" not in p:
+            raise InputError(src, f, "expected a mapping with 'id' and 's' or 'height'")
+        pid = str(p["id"])
+        if pid in seen:
+            raise InputError(src, f"{f}.id", f"duplicate push point id {pid!r}")
+        seen.add(pid)
+        direction = p.get("direction", [1.0, 0.0, 0.0])
+        if not isinstance(direction, (list, tuple)) or len(direction) != 3:
+            raise InputError(src, f"{f}.direction", "expected [x, y, z]")
+        dvec = np.array([_num(v, src, f"{f}.direction") for v in direction])
+        dvec[2] = 0.0  # azimuth only: the pitch is set perpendicular to the cane
+        if np.linalg.norm(dvec) < 1e-9:
+            raise InputError(src, f"{f}.direction", "needs a non-zero horizontal component")
+        dvec /= np.linalg.norm(dvec)
+        trial = p.get("trial")
+        push_points.append(PushPoint(pid, _location(p, src, f), tuple(float(v) for v in dvec),
+                                     None if trial is None else str(trial)))
+
+    mat = data.get("material", {}) or {}
+    if not isinstance(mat, dict):
+        raise InputError(src, "material", "expected a mapping")
+    material = Material(
+        flexural_modulus=_num(mat.get("flexural_modulus", DORMANT_MEAN_MODULUS), src, "material.flexural_modulus", positive=True),
+        density=_num(mat.get("density", DEFAULT_DENSITY), src, "material.density", positive=True),
+        joint_damping=_num(mat.get("joint_damping", DEFAULT_DAMPING), src, "material.joint_damping", nonneg=True),
+    )
+    prov = data.get("provenance", {}) or {}
+    if not isinstance(prov, dict):
+        raise InputError(src, "provenance", "expected a mapping")
+    return CaneDescription(cid, arr, raw, tuple(calipers), tuple(push_points), material, dict(prov), src)
+
+
+def load_cane(path: str | Path) -> CaneDescription:
+    """Read and validate one cane description YAML file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError(str(path), "<file>", f"cannot read: {exc.strerror}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}" if mark is not None else "<yaml>"
+        raise InputError(str(path), where, f"malformed YAML: {getattr(exc, 'problem', exc)}") from None
+    return cane_from_dict(data, str(path))
+
+
+def cane_to_dict(cane: CaneDescription) -> dict[str, Any]:
+    """Inverse of :func:`cane_from_dict` (for writing generated descriptions)."""
+
+    def loc(w: Location) -> dict[str, float]:
+        return {"s": w.s} if w.s is not None else {"height": w.height}
+
+    return {
+        "id": cane.id,
+        "polyline": {"raw": cane.raw_polyline, "points": [[float(v) for v in p] for p in cane.polyline]},
+        "calipers": [{**loc(c.where), "diameter": c.diameter} for c in cane.calipers],
+        "push_points": [
+            {"id": p.id, **loc(p.where), "direction": list(p.direction), **({"trial": p.trial} if p.trial else {})}
+            for p in cane.push_points
+        ],
+        "material": {
+            "flexural_modulus": cane.material.flexural_modulus,
+            "density": cane.material.density,
+            "joint_damping": cane.material.joint_damping,
+        },
+        "provenance": cane.provenance,
+    }

@@ -1,0 +1,238 @@
+"""The one intermediate representation: a serial chain every backend compiles.
+
+``build_chain(cane, push_id, config)`` turns a cane description into rigid
+links (solid cylinders) joined by two coincident revolute joints each (two
+bending axes perpendicular to the link, no twist), with torsional springs from
+a named stiffness formula, plus the probe: a point rigidly attached to one
+link and a fixed world direction. All positions are in the world frame of the
+rest (unloaded) configuration, z up, base of the cane at its first polyline
+point, which is clamped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .cane import CaneDescription, Location
+from .config import ModelConfig
+from .diameter import fit_diameter
+from .errors import InputError
+from .geometry import Curve, chaikin, greedy_discretize
+from .stiffness import joint_stiffness
+
+
+@dataclass(frozen=True)
+class Chain:
+    """Backend-agnostic pseudo-rigid-body chain (SI units, world rest frame).
+
+    Attributes
+    ----------
+    nodes : (n+1, 3) array
+        Joint positions; node 0 is the clamped base, node n the tip.
+    frames : (n, 3, 3) array
+        Rest orientation of each link; columns x, y, z with z along the link.
+        The two joints preceding link j rotate about its x then its y axis.
+    lengths, diameters, masses : (n,) arrays
+    inertias : (n, 3) array
+        Principal moments about the centre of mass in the link frame.
+    stiffness : (n,) array
+        Torsional stiffness (N m/rad) of both joints preceding each link.
+    damping : float
+        Joint damping (N m s/rad), the same for every joint.
+    push_link : int
+        Index of the link that carries the probe point.
+    push_point : (3,) array
+        Probe point (world, rest).
+    direction : (3,) array
+        Unit probe direction (world, fixed during the push).
+    gravity : (3,) array
+    meta : dict
+        Cane id, push point id, configuration, assumptions, warnings.
+    """
+
+    nodes: np.ndarray
+    frames: np.ndarray
+    lengths: np.ndarray
+    diameters: np.ndarray
+    masses: np.ndarray
+    inertias: np.ndarray
+    stiffness: np.ndarray
+    damping: float
+    push_link: int
+    push_point: np.ndarray
+    direction: np.ndarray
+    gravity: np.ndarray
+    modulus: float
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_links(self) -> int:
+        return len(self.lengths)
+
+    @property
+    def n_dof(self) -> int:
+        return 2 * self.n_links
+
+    def com(self, j: int) -> np.ndarray:
+        """Centre of mass of link ``j`` (world, rest)."""
+        return self.nodes[j] + 0.5 * self.lengths[j] * self.frames[j][:, 2]
+
+    def local(self, j: int, point: np.ndarray) -> np.ndarray:
+        """Coordinates of a world rest point in link ``j``'s frame (origin at node j)."""
+        return self.frames[j].T @ (np.asarray(point) - self.nodes[j])
+
+    def relative_pose(self, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """(R, p) of link ``j``'s frame in its parent's (world for j = 0)."""
+        if j == 0:
+            return self.frames[0].copy(), self.nodes[0].copy()
+        rp = self.frames[j - 1]
+        return rp.T @ self.frames[j], rp.T @ (self.nodes[j] - self.nodes[j - 1])
+
+    def joint_axes_world(self) -> np.ndarray:
+        """(2n, 3) rest-configuration joint axes in world, in joint order."""
+        return np.stack([self.frames[j][:, k] for j in range(self.n_links) for k in (0, 1)])
+
+    def fingerprint(self) -> str:
+        """Short hash of everything the physics depends on."""
+        h = hashlib.sha256()
+        for a in (self.nodes, self.frames, self.lengths, self.diameters, self.masses,
+                  self.inertias, self.stiffness, self.push_point, self.direction, self.gravity):
+            h.update(np.ascontiguousarray(np.round(a, 12)).tobytes())
+        h.update(json.dumps([self.damping, self.push_link]).encode())
+        return h.hexdigest()[:12]
+
+
+# ---------------------------------------------------------------- building
+
+
+def cane_curve(cane: CaneDescription, config: ModelConfig) -> Curve:
+    """The smoothed centreline (Chaikin only when the polyline is raw)."""
+    pts = cane.polyline
+    if cane.raw_polyline and config.chaikin_iterations > 0:
+        pts = chaikin(pts, config.chaikin_iterations, config.chaikin_strength)
+    return Curve.from_points(pts)
+
+
+def resolve_s(curve: Curve, where: Location, source: str, fld: str) -> float:
+    """Arc length of a location given by ``s`` or ``height``."""
+    if where.s is not None:
+        if where.s > curve.length * (1 + 1e-9):
+            raise InputError(source, f"{fld}.s", f"{where.s:.4g} m is beyond the cane's length {curve.length:.4g} m")
+        return float(min(where.s, curve.length))
+    s = curve.s_at_height(float(where.height))
+    if s is None:
+        zmin, zmax = curve.points[:, 2].min(), curve.points[:, 2].max()
+        raise InputError(source, f"{fld}.height",
+                         f"{where.height:.4g} m is outside the cane's heights [{zmin:.4g}, {zmax:.4g}] m")
+    return s
+
+
+def _parallel_transport_frames(tangents: np.ndarray) -> np.ndarray:
+    """Link frames with z along each tangent, x carried by minimal rotations."""
+    frames = np.empty((len(tangents), 3, 3))
+    z = tangents[0]
+    ref = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = ref - (ref @ z) * z
+    x /= np.linalg.norm(x)
+    for j, zj in enumerate(tangents):
+        x = x - (x @ zj) * zj  # project previous x onto the new normal plane
+        x /= np.linalg.norm(x)
+        frames[j] = np.column_stack([x, np.cross(zj, x), zj])
+    return frames
+
+
+def probe_direction(azimuth: np.ndarray, tangent: np.ndarray, angle_deg: float) -> np.ndarray:
+    """Probe direction: the horizontal azimuth pitched to be perpendicular to
+    the cane (what the field crew set by hand), then pitched by ``angle_deg``
+    (positive up) for the paper's probe-angle sensitivity."""
+    a = np.asarray(azimuth, float)
+    a = a / np.linalg.norm(a)
+    ez = np.array([0.0, 0.0, 1.0])
+    t = np.asarray(tangent, float)
+    # u = cos(th) a + sin(th) ez with u . t = 0
+    th = np.arctan2(-(a @ t), t[2]) if abs(t[2]) > 1e-12 or abs(a @ t) > 1e-12 else 0.0
+    th += np.deg2rad(angle_deg)
+    u = np.cos(th) * a + np.sin(th) * ez
+    return u / np.linalg.norm(u)
+
+
+def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None = None) -> Chain:
+    """Discretize ``cane`` into a :class:`Chain` probed at push point ``push_id``."""
+    config = config or ModelConfig()
+    src = cane.source
+    curve = cane_curve(cane, config)
+    nodes_s = greedy_discretize(curve, config.max_deviation_m, config.segments, config.min_segments)
+    nodes = curve.at(nodes_s)
+
+    cal_s = np.array([resolve_s(curve, c.where, src, f"calipers[{i}]") for i, c in enumerate(cane.calipers)])
+    cal_d = np.array([c.diameter for c in cane.calipers])
+    fit = fit_diameter(cal_s, cal_d, config.diameter_factor)
+    mid_s = 0.5 * (nodes_s[:-1] + nodes_s[1:])  # paper: diameter at the middle of each link
+    diam_raw = fit(mid_s)
+    clamped = int(np.sum(diam_raw < config.min_diameter_m))
+    diam = np.maximum(diam_raw, config.min_diameter_m)
+
+    E = config.modulus_pa if config.modulus_pa is not None else cane.material.flexural_modulus
+    rho = config.density if config.density is not None else cane.material.density
+    damping = config.damping if config.damping is not None else cane.material.joint_damping
+
+    pp = cane.push_point(push_id)
+    pidx = cane.push_points.index(pp)
+    s_push = resolve_s(curve, pp.where, src, f"push_points[{pidx}]")
+    link = int(np.clip(np.searchsorted(nodes_s, s_push, side="left") - 1, 0, len(nodes_s) - 2))
+    point = curve.at(s_push)
+    u = probe_direction(np.array(pp.direction), curve.tangent(s_push), config.probe_angle_deg)
+
+    warnings = []
+    if clamped:
+        warnings.append(f"{clamped} link diameter(s) extrapolated below {config.min_diameter_m} m were clamped")
+    meta = {
+        "cane": cane.id,
+        "push_point": pp.id,
+        "source": src,
+        "s_push": s_push,
+        "cane_length": curve.length,
+        "nodes_s": nodes_s.tolist(),
+        "diameter_fit": {"s_centroid": fit.s_centroid, "d_centroid": fit.d_centroid, "slope": fit.slope,
+                         "factor": fit.factor},
+        "config": config.to_dict(),
+        "assumptions": list(cane.provenance.get("assumptions", [])),
+        "warnings": warnings,
+        "synthetic": bool(cane.provenance.get("synthetic", False)),
+    }
+    return assemble_chain(nodes, diam, E, rho, damping, config.stiffness_formula, link, point, u,
+                          config.gravity, meta, src)
+
+
+def assemble_chain(nodes: np.ndarray, diameters: np.ndarray, modulus: float, density: float, damping: float,
+                   formula: str, push_link: int, push_point: np.ndarray, direction: np.ndarray,
+                   gravity: float, meta: dict[str, Any] | None = None, source: str = "<memory>") -> Chain:
+    """Rigid solid-cylinder links between ``nodes`` with springs by ``formula``.
+
+    The physical half of :func:`build_chain`, also used directly to build
+    chains from other geometry (the synthetic truth model's fine chain).
+    """
+    nodes = np.asarray(nodes, float)
+    vec = np.diff(nodes, axis=0)
+    lengths = np.linalg.norm(vec, axis=1)
+    if np.any(lengths < 1e-6):
+        raise InputError(source, "polyline", "discretization produced a zero-length link (degenerate polyline)")
+    frames = _parallel_transport_frames(vec / lengths[:, None])
+    diam = np.asarray(diameters, float)
+    I_area = np.pi * diam**4 / 64.0
+    K = joint_stiffness(formula, modulus * I_area, lengths)
+    r = diam / 2.0
+    masses = density * np.pi * r**2 * lengths
+    inertias = np.column_stack([
+        masses * (3 * r**2 + lengths**2) / 12.0,
+        masses * (3 * r**2 + lengths**2) / 12.0,
+        masses * r**2 / 2.0,
+    ])
+    g = np.array([0.0, 0.0, -float(gravity)])
+    return Chain(nodes, frames, lengths, diam, masses, inertias, K, float(damping), int(push_link),
+                 np.asarray(push_point, float), np.asarray(direction, float), g, float(modulus), dict(meta or {}))

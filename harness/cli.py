@@ -1,0 +1,172 @@
+"""``canebench`` command line: run, report, backends, bench, generate."""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import sys
+import time
+import warnings
+from pathlib import Path
+
+from .config import ModelConfig, parse_assignments
+from .errors import CanebenchError
+
+DEFAULT_BACKENDS = "mujoco,pinocchio"
+
+
+def _progress(done: int, total: int, outcome) -> None:
+    parts = []
+    for r in outcome.rows:
+        k = r.get("k_sim")
+        kk = f"{k:.4g}" if isinstance(k, float) and k == k else "-"
+        parts.append(f"{r['backend']}={kk}" + ("" if r["status"] == "ok" else f"[{r['status']}]"))
+    trial = outcome.rows[0]["trial"] if outcome.rows else "?"
+    print(f"[{done:3d}/{total}] {trial:10s} {' '.join(parts)}", flush=True)
+
+
+def cmd_run(a: argparse.Namespace) -> int:
+    from .dataset import bundled_dataset, load_dataset
+    from .protocol import get_protocol
+    from .registry import select
+    from .run import default_jobs, provenance, run_trials, write_run
+
+    data_dir = Path(a.field) if a.field else bundled_dataset()
+    trials = load_dataset(data_dir, a.trials)
+    if a.limit:
+        trials = trials[: a.limit]
+    names = [n.strip() for n in a.backends.split(",") if n.strip()]
+    usable, skipped = select(names)
+    for n, why in skipped.items():
+        print(f"skipping backend {n}: {why}", file=sys.stderr)
+    if not usable:
+        print("no usable backend", file=sys.stderr)
+        return 2
+    proto = get_protocol(a.protocol)
+    config = ModelConfig().with_overrides(parse_assignments(a.set))
+    out = Path(a.out) if a.out else Path("canebench-runs") / _dt.datetime.now().strftime("run-%Y%m%d-%H%M%S")
+    synthetic = all(t.cane.provenance.get("synthetic", False) for t in trials)
+    assumptions = sorted({s for t in trials for s in t.cane.provenance.get("assumptions", [])})
+    print(f"canebench run: {len(trials)} trials from {data_dir}"
+          f"{' (SYNTHETIC data)' if synthetic else ''}, backends {','.join(usable)}, protocol {proto.name}, "
+          f"{a.jobs} worker(s) -> {out}")
+    for s in assumptions:
+        print(f"  assumption: {s}")
+    t0 = time.perf_counter()
+    res, traces, fields = run_trials(trials, usable, proto, config, out, jobs=a.jobs, max_steps=a.max_steps,
+                                     progress=_progress)
+    meta = provenance(usable, proto, config, {
+        "command": " ".join(sys.argv),
+        "dataset": str(data_dir.resolve()),
+        "dataset_provenance": trials[0].cane.provenance if trials else {},
+        "synthetic": synthetic,
+        "assumptions": assumptions,
+        "skipped_backends": skipped,
+        "n_trials": len(trials),
+        "wall_s": time.perf_counter() - t0,
+    })
+    write_run(out, res, traces, fields, meta)
+    ok = res[res.status == "ok"]
+    print(f"done in {meta['wall_s']:.1f} s: {len(ok)} scored rows, "
+          f"{int((res.status == 'failed').sum())} failed, {int((res.status == 'unscored').sum())} unscored")
+    for b, g in ok.groupby("backend"):
+        print(f"  {b:10s} median |ln(k_sim/k_field)| = {g.log_ratio.abs().median():.3f} over {len(g)} trials")
+    if not a.no_report:
+        from canebench.reports.build import build_report
+
+        page = build_report(out)
+        print(f"report: {page}")
+    print(f"results: {out / 'results.csv'}")
+    return 0
+
+
+def cmd_report(a: argparse.Namespace) -> int:
+    from canebench.reports.build import build_report
+
+    print(build_report(Path(a.run_dir)))
+    return 0
+
+
+def cmd_backends(a: argparse.Namespace) -> int:
+    from .protocol import PROTOCOLS
+    from .registry import ENTRY_POINT_GROUP, discover
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reg = discover()
+    print(f"entry-point group: {ENTRY_POINT_GROUP}")
+    for name, info in sorted(reg.items()):
+        state = f"available, {info.kind}, version {info.version}" if info.available else f"UNAVAILABLE: {info.reason}"
+        print(f"{name:12s} {state}  [{info.target}]  tags={','.join(info.tags)}")
+        if info.available and a.verbose:
+            b = info.cls()
+            for p in PROTOCOLS.values():
+                print(f"    {p.name}: {b.settings(p)}")
+    return 0
+
+
+def cmd_generate(a: argparse.Namespace) -> int:
+    from canebench.canes.generate import generate
+
+    generate(Path(a.out) if a.out else None, seed=a.seed)
+    return 0
+
+
+def cmd_bench(a: argparse.Namespace) -> int:
+    from .bench import bench_protocols
+
+    bench_protocols(trials=a.trials, backends=a.backends.split(","), steps=a.steps)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .run import default_jobs
+
+    p = argparse.ArgumentParser(prog="canebench", description=__doc__)
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    r = sub.add_parser("run", help="probe trials on backends and score them against field stiffness")
+    r.add_argument("--field", help="dataset directory (push_points.csv + trials/); default: bundled synthetic set")
+    r.add_argument("--backends", default=DEFAULT_BACKENDS, help="comma-separated backend names")
+    r.add_argument("--protocol", default="fast", help="probe protocol: fast (default) or paper")
+    r.add_argument("--out", help="run folder (default canebench-runs/run-<time>)")
+    r.add_argument("--trials", help="comma-separated globs on trial or cane ids, e.g. 'b1c*,b2c3t1'")
+    r.add_argument("--limit", type=int, help="only the first N selected trials")
+    r.add_argument("--max-steps", type=int, help="cap on protocol steps per trial")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE", help="model configuration override (repeatable)")
+    r.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes")
+    r.add_argument("--no-report", action="store_true")
+    r.set_defaults(fn=cmd_run)
+
+    rp = sub.add_parser("report", help="rebuild the report of a run folder from its CSVs")
+    rp.add_argument("run_dir")
+    rp.set_defaults(fn=cmd_report)
+
+    b = sub.add_parser("backends", help="list registered backends, versions, availability")
+    b.add_argument("-v", "--verbose", action="store_true", help="show each backend's configuration per protocol")
+    b.set_defaults(fn=cmd_backends)
+
+    g = sub.add_parser("generate", help="regenerate the bundled synthetic dataset (seeded)")
+    g.add_argument("--out", help="dataset directory (default: the package's canes/synthetic)")
+    g.add_argument("--seed", type=int, default=20240515)
+    g.set_defaults(fn=cmd_generate)
+
+    be = sub.add_parser("bench", help="benchmark: paper vs fast protocol (stiffness difference, speed-up)")
+    be.add_argument("--trials", default="b1c1t1,b3c2t2,b5c3t1", help="trial globs on the bundled dataset")
+    be.add_argument("--backends", default="mujoco")
+    be.add_argument("--steps", type=int, default=None, help="protocol steps per trial (default: full trial)")
+    be.set_defaults(fn=cmd_bench)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.fn(args) or 0)
+    except CanebenchError as exc:
+        print(f"canebench: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,152 @@
+"""One model configuration for every modelling choice.
+
+A run takes a :class:`ModelConfig`; sensitivity studies, sweeps and the
+discovery workflow call the same pipeline with ``config.replace(...)`` or
+``config.with_overrides({"modulus_pa": "3e9"})`` (the CLI's ``--set``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from .errors import InputError
+
+GF_TO_N = 9.80665e-3  # one gram-force in newtons
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Every modelling choice that turns a cane description into a chain.
+
+    ``None`` for a material field means "take it from the cane description".
+
+    Attributes
+    ----------
+    modulus_pa : float or None
+        Flexural modulus E (Pa). The paper's naive case uses 4.57e9 for all canes.
+    density : float or None
+        Wood density (kg/m^3); paper 580.
+    damping : float or None
+        Joint damping (N m s/rad); paper 0.15.
+    diameter_factor : float
+        0: constant diameter equal to the caliper centroid's; 1: the
+        least-squares line through the calipers; in between, the slope scaled.
+    segments : int or None
+        Fixed number of links; ``None`` uses the greedy 5 mm rule.
+    max_deviation_m : float
+        Greedy discretization tolerance (paper: 5 mm).
+    min_segments : int
+        Fewest links the greedy rule returns (paper: 3, the fewest its
+        algorithm produced; a straight cane would otherwise get one link).
+    stiffness_formula : str
+        Name in :data:`canebench.stiffness.FORMULAS` (``paper`` = 2EI/L).
+    probe_angle_deg : float
+        Probe pitch from perpendicular to the cane (paper's Morris range +-30).
+    gravity : float
+        Gravitational acceleration (m/s^2) along -z; MuJoCo's default 9.81 as in the paper.
+    chaikin_iterations, chaikin_strength : int, float
+        Smoothing of raw polylines (paper: 5 iterations, strength 0.35).
+    min_diameter_m : float
+        Floor for extrapolated diameters; links clamped to it are reported.
+    effects : tuple of str
+        Names of extra physical effects (pluggable; empty reproduces the paper).
+    """
+
+    modulus_pa: float | None = None
+    density: float | None = None
+    damping: float | None = None
+    diameter_factor: float = 1.0
+    segments: int | None = None
+    max_deviation_m: float = 0.005
+    min_segments: int = 3
+    stiffness_formula: str = "paper"
+    probe_angle_deg: float = 0.0
+    gravity: float = 9.81
+    chaikin_iterations: int = 5
+    chaikin_strength: float = 0.35
+    min_diameter_m: float = 1.0e-3
+    effects: tuple[str, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self, source: str = "model configuration") -> None:
+        """Raise :class:`InputError` naming the field for an invalid value."""
+        for name in ("modulus_pa", "density", "damping"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and v > 0):
+                raise InputError(source, name, f"must be a positive finite number, got {v!r}")
+        if not (0.0 <= self.diameter_factor <= 1.0):
+            raise InputError(source, "diameter_factor", f"must be in [0, 1], got {self.diameter_factor!r}")
+        if self.segments is not None and self.segments < 1:
+            raise InputError(source, "segments", f"must be >= 1 or None, got {self.segments!r}")
+        if not (self.max_deviation_m > 0):
+            raise InputError(source, "max_deviation_m", "must be > 0")
+        if self.min_segments < 1:
+            raise InputError(source, "min_segments", "must be >= 1")
+        if not (-89.0 < self.probe_angle_deg < 89.0):
+            raise InputError(source, "probe_angle_deg", "must be within (-89, 89) degrees")
+        if not (math.isfinite(self.gravity) and self.gravity >= 0):
+            raise InputError(source, "gravity", "must be a finite number >= 0")
+        if not (0 < self.chaikin_strength <= 0.5) or self.chaikin_iterations < 0:
+            raise InputError(source, "chaikin_strength", "strength must be in (0, 0.5], iterations >= 0")
+        if not (self.min_diameter_m > 0):
+            raise InputError(source, "min_diameter_m", "must be > 0")
+
+    def replace(self, **changes: Any) -> "ModelConfig":
+        """A copy with some fields changed (validated)."""
+        return dataclasses.replace(self, **changes)
+
+    def with_overrides(self, overrides: Mapping[str, Any], source: str = "--set") -> "ModelConfig":
+        """A copy with fields set from strings or values (CLI ``key=value``)."""
+        hints = typing.get_type_hints(ModelConfig)
+        names = {f.name for f in dataclasses.fields(self)}
+        changes: dict[str, Any] = {}
+        for key, raw in overrides.items():
+            if key not in names:
+                raise InputError(source, key, f"unknown model setting; known: {', '.join(sorted(names))}")
+            changes[key] = _coerce(raw, hints[key], source, key)
+        return self.replace(**changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["effects"] = list(self.effects)
+        return d
+
+
+def parse_assignments(items: list[str] | None, source: str = "--set") -> dict[str, str]:
+    """Parse ``["a=1", "b=x"]`` into a dict, naming any malformed item."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        if "=" not in item:
+            raise InputError(source, item, "expected key=value")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def _coerce(raw: Any, hint: Any, source: str, key: str) -> Any:
+    if not isinstance(raw, str):
+        return raw
+    text = raw.strip()
+    if typing.get_origin(hint) is tuple:
+        return tuple(s.strip() for s in text.split(",") if s.strip())
+    args = typing.get_args(hint)
+    optional = type(None) in args
+    if optional and text.lower() in ("none", "null", ""):
+        return None
+    base = next((a for a in args if a is not type(None)), hint) if args else hint
+    try:
+        if base is bool:
+            return text.lower() in ("1", "true", "yes", "on")
+        if base is int:
+            return int(text)
+        if base is float:
+            return float(text)
+        return text
+    except ValueError as exc:
+        raise InputError(source, key, f"cannot read {raw!r} as {getattr(base, '__name__', base)}") from exc

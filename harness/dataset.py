@@ -1,0 +1,114 @@
+"""Datasets: cane descriptions paired with rig trials.
+
+A dataset directory holds ``push_points.csv`` (bush, cane, trial, height_mm,
+diameter_mm, file) and the rig CSVs it names - the field campaign's layout.
+If it also has ``canes/*.yaml`` descriptions (the bundled synthetic set),
+those give the geometry. Otherwise (the real field data, which published no
+geometry) each cane is ASSUMED straight and vertical from the ground to its
+highest push point, with the caliper diameters at the push heights; that
+assumption is carried into every output.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from .cane import CaneDescription, cane_from_dict, load_cane
+from .errors import InputError
+
+STRAIGHT_ASSUMPTION = ("geometry assumed: straight vertical cane from the ground to the highest push point "
+                       "(the field data has no polylines)")
+
+
+def bundled_dataset() -> Path:
+    """Path of the bundled synthetic dataset (installed package data)."""
+    from canebench import canes
+
+    return Path(canes.__file__).resolve().parent / "synthetic"
+
+
+@dataclass(frozen=True)
+class Trial:
+    id: str  # e.g. b1c2t3
+    cane: CaneDescription
+    push_id: str
+    csv: Path | None
+    bush: int
+    cane_no: int
+    trial_no: int
+    height_mm: float
+    diameter_mm: float
+
+
+def read_push_points(path: Path) -> pd.DataFrame:
+    src = str(path)
+    try:
+        df = pd.read_csv(path)
+    except FileNotFoundError:
+        raise InputError(src, "<file>", "not found (a dataset needs push_points.csv)") from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise InputError(src, "<file>", f"malformed CSV: {exc}") from None
+    for col in ("bush", "cane", "trial", "height_mm", "diameter_mm", "file"):
+        if col not in df.columns:
+            raise InputError(src, col, "missing column")
+    for col in ("bush", "cane", "trial", "height_mm", "diameter_mm"):
+        vals = pd.to_numeric(df[col], errors="coerce")
+        if vals.isna().any():
+            i = int(vals.isna().to_numpy().argmax())
+            raise InputError(src, col, f"row {i + 2}: not a number ({df[col].iloc[i]!r})")
+        if col in ("height_mm", "diameter_mm") and (vals <= 0).any():
+            i = int((vals <= 0).to_numpy().argmax())
+            raise InputError(src, col, f"row {i + 2}: must be > 0, got {vals.iloc[i]}")
+        df[col] = vals
+    return df
+
+
+def straight_cane(bush: int, cane: int, rows: pd.DataFrame, source: str) -> CaneDescription:
+    """A straight vertical cane from the ground through the push points."""
+    top = float(rows["height_mm"].max()) / 1000.0
+    data = {
+        "id": f"b{bush}c{cane}",
+        "polyline": {"raw": False, "points": [[0.0, 0.0, 0.0], [0.0, 0.0, top]]},
+        "calipers": [{"height": float(r.height_mm) / 1000.0, "diameter": float(r.diameter_mm) / 1000.0}
+                     for r in rows.itertuples()],
+        "push_points": [{"id": str(int(r.trial)), "height": float(r.height_mm) / 1000.0, "direction": [1, 0, 0]}
+                        for r in rows.itertuples()],
+        "provenance": {"source": source, "synthetic": False, "assumptions": [STRAIGHT_ASSUMPTION]},
+    }
+    return cane_from_dict(data, source)
+
+
+def load_dataset(directory: str | Path, select: str | None = None) -> list[Trial]:
+    """All trials of a dataset directory, optionally filtered by glob(s).
+
+    ``select`` is a comma-separated list of glob patterns on trial ids
+    (``b1c*``, ``b2c3t1``) or cane ids.
+    """
+    d = Path(directory)
+    if not d.is_dir():
+        raise InputError(str(d), "--field", "dataset directory not found")
+    pp = read_push_points(d / "push_points.csv")
+    yaml_dir = d / "canes"
+    descriptions: dict[str, CaneDescription] = {}
+    if yaml_dir.is_dir():
+        for y in sorted(yaml_dir.glob("*.yaml")):
+            c = load_cane(y)
+            descriptions[c.id] = c
+    trials = []
+    for (bush, cane), rows in pp.groupby(["bush", "cane"], sort=True):
+        cid = f"b{int(bush)}c{int(cane)}"
+        desc = descriptions.get(cid) or straight_cane(int(bush), int(cane), rows, str(d / "push_points.csv"))
+        for r in rows.itertuples():
+            tid = f"{cid}t{int(r.trial)}"
+            trials.append(Trial(tid, desc, str(int(r.trial)), (d / str(r.file)).resolve(), int(bush), int(cane),
+                                int(r.trial), float(r.height_mm), float(r.diameter_mm)))
+    if select:
+        pats = [p.strip() for p in select.split(",") if p.strip()]
+        trials = [t for t in trials if any(fnmatch.fnmatch(t.id, p) or fnmatch.fnmatch(t.cane.id, p) for p in pats)]
+        if not trials:
+            raise InputError(str(d), "--trials", f"no trial matches {select!r}")
+    return trials

@@ -1,0 +1,38 @@
+"""Exceptions that name the file and the field at fault."""
+
+from __future__ import annotations
+
+
+class CanebenchError(Exception):
+    """Base class of every error canebench raises on purpose."""
+
+
+class InputError(CanebenchError, ValueError):
+    """Bad user input: malformed YAML/CSV, NaN, non-positive sizes, ...
+
+    Parameters
+    ----------
+    source : str
+        File (or other origin) the bad value came from.
+    field : str
+        Dotted path of the offending field, e.g. ``calipers[2].diameter``.
+    message : str
+        What is wrong with it.
+    """
+
+    def __init__(self, source: str, field: str, message: str) -> None:
+        self.source = str(source)
+        self.field = field
+        self.message = message
+        super().__init__(f"{self.source}: field '{field}': {message}")
+
+
+class BackendUnavailable(CanebenchError):
+    """A registered backend whose engine cannot be imported or used."""
+
+
+class UnknownBackend(CanebenchError, KeyError):
+    """A backend name that is not in the registry."""
+
+    def __str__(self) -> str:  # KeyError quotes its message; keep it readable
+        return str(self.args[0]) if self.args else "unknown backend"

@@ -1,0 +1,179 @@
+"""The field rig's CSV format and field stiffness extraction.
+
+Rig CSV columns (see ../shared/field-data/README.md): ``Iteration``,
+``Time Stamp`` (16-bit ms counter that wraps), ``Load Cell Reading (gf)``
+(compressive positive, with a tare offset), ``Displacement (mm)`` (absolute
+probe position, 0.5 mm per sample), ``Height (mm)``.
+
+Extraction, step by step (each exists for a reason):
+
+1. Validate: every column present and numeric; a NaN or a non-monotonic
+   displacement is an error naming the file, row and column.
+2. Time stamps are *unwrapped* (add 65536 at each negative jump) only to
+   report the trial's duration; physics uses displacement, which the stepper
+   sets exactly, so a wrapped counter cannot corrupt the slope.
+3. Displacement is made relative to the first sample: the rig logs an
+   absolute carriage position whose origin means nothing for the cane.
+4. Contact onset: the probe starts short of the cane, so the record begins
+   with a flat stretch (tare plus noise). A hinge model (flat, then a line)
+   is fitted over the early part of the record; its knee is the onset. Fitting
+   the flat part as part of the slope would lower the stiffness.
+5. Tare: the level of the flat stretch is subtracted, so forces are contact
+   forces; with no flat stretch (contact from the first sample) the first
+   reading is taken as zero force and the trial is flagged.
+6. Force limit: samples at or beyond 1000 gf (the rig's stop) are dropped;
+   the load cell and the rig's stop make them unreliable.
+7. Slope: least squares of force (N) on displacement (mm) from onset on; R^2
+   and the residual RMS are kept as fit quality.
+8. Usability: no slope is reported when there are fewer than 5 contact
+   samples, the raw reading never exceeds 20 gf (the rig's own analysis fits
+   only force > 20 gf, so it had no data either), the slope is not positive,
+   or R^2 < 0.8. Every such trial carries its reason.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .config import GF_TO_N
+from .errors import InputError
+from .fit import fit_line
+
+COLUMNS = {
+    "iteration": "Iteration",
+    "time": "Time Stamp",
+    "force": "Load Cell Reading (gf)",
+    "disp": "Displacement (mm)",
+    "height": "Height (mm)",
+}
+FORCE_LIMIT_GF = 1000.0
+RIG_FIT_THRESHOLD_GF = 20.0
+MIN_CONTACT_SAMPLES = 5
+MIN_R2 = 0.8
+ONSET_SEARCH_GF = 150.0  # hinge fitted over the record until the reading rises this much
+
+
+@dataclass
+class RigTrial:
+    path: str
+    displacement_mm: np.ndarray  # relative to first sample
+    force_gf: np.ndarray  # raw reading
+    time_s: np.ndarray  # unwrapped, from 0
+    height_mm: float
+
+
+@dataclass
+class FieldFit:
+    """Field stiffness of one trial and how it was obtained."""
+
+    k_n_per_mm: float  # NaN when unusable
+    r2: float
+    rms_n: float
+    n_contact: int
+    onset_mm: float
+    tare_gf: float
+    usable: bool
+    reason: str = ""
+    flags: list[str] = field(default_factory=list)
+    displacement_mm: np.ndarray | None = None  # contact samples, from onset
+    force_n: np.ndarray | None = None
+
+    @property
+    def n_steps(self) -> int:
+        """Protocol steps the simulation may run to cover the same push."""
+        return self.n_contact
+
+
+def read_rig_csv(path: str | Path) -> RigTrial:
+    """Read and validate one rig CSV."""
+    path = Path(path)
+    src = str(path)
+    try:
+        df = pd.read_csv(path)
+    except FileNotFoundError:
+        raise InputError(src, "<file>", "file not found") from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise InputError(src, "<file>", f"malformed CSV: {exc}") from None
+    df.columns = [str(c).strip() for c in df.columns]
+    for key, col in COLUMNS.items():
+        if col not in df.columns:
+            raise InputError(src, col, f"missing column; found {list(df.columns)}")
+    if len(df) < 2:
+        raise InputError(src, "<rows>", "fewer than 2 samples")
+    out = {}
+    for key in ("time", "force", "disp", "height"):
+        col = COLUMNS[key]
+        vals = pd.to_numeric(df[col], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(vals)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(src, col, f"row {i + 2}: not a finite number ({df[col].iloc[i]!r})")
+        out[key] = vals
+    disp = out["disp"] - out["disp"][0]
+    if np.any(np.diff(disp) <= 0):
+        i = int(np.argmax(np.diff(disp) <= 0)) + 1
+        raise InputError(src, COLUMNS["disp"], f"row {i + 2}: displacement does not increase")
+    t = out["time"].copy()
+    jumps = np.diff(t)
+    t[1:] += 65536.0 * np.cumsum(jumps < -32768)  # 16-bit counter wrapped
+    return RigTrial(src, disp, out["force"], (t - t[0]) / 1000.0, float(np.median(out["height"])))
+
+
+def _hinge_onset(x: np.ndarray, y: np.ndarray) -> tuple[int, float]:
+    """Index of the knee and the flat level of the best flat-then-line fit."""
+    best = (math.inf, 0, float(y[0]))
+    for i0 in range(0, max(1, len(x) - 3)):
+        flat = y[: i0 + 1]
+        c = float(flat.mean()) if i0 >= 2 else float(y[0])
+        xr, yr = x[i0:] - x[i0], y[i0:] - c
+        b = float((xr @ yr) / (xr @ xr)) if xr @ xr > 0 else 0.0
+        sse = float(((flat - c) ** 2).sum() + ((yr - b * xr) ** 2).sum())
+        if sse < best[0]:
+            best = (sse, i0, c)
+    return best[1], best[2]
+
+
+def extract_field_stiffness(trial: RigTrial) -> FieldFit:
+    """Field stiffness (N/mm) of one trial; see the module docstring for the steps."""
+    x, f = trial.displacement_mm, trial.force_gf
+    flags: list[str] = []
+    # hinge over the early record only: later curvature must not move the knee
+    rise = f - np.minimum.accumulate(f)
+    end = int(np.argmax(rise > ONSET_SEARCH_GF)) if np.any(rise > ONSET_SEARCH_GF) else len(f)
+    end = max(end, min(len(f), 8))
+    i0, level = _hinge_onset(x[:end], f[:end])
+    if i0 < 2:
+        flags.append("no pre-contact baseline: first reading taken as zero force")
+        level = float(f[0])
+        i0 = 0
+    tare = level
+    keep = np.arange(len(f)) >= i0
+    over = f >= FORCE_LIMIT_GF
+    if over.any():
+        keep &= np.arange(len(f)) < int(np.argmax(over))
+        flags.append("force limit reached")
+    xs, fs = x[keep] - x[i0], (f[keep] - tare) * GF_TO_N
+    drops = np.diff(f[keep]) < -30.0
+    if drops.any():
+        flags.append(f"{int(drops.sum())} force drop(s) > 30 gf (slip or obstruction)")
+    fit = fit_line(xs, fs)
+    base = dict(n_contact=int(keep.sum()), onset_mm=float(x[i0]), tare_gf=float(tare), flags=flags,
+                displacement_mm=xs, force_n=fs)
+    reason = ""
+    if keep.sum() < MIN_CONTACT_SAMPLES:
+        reason = f"only {int(keep.sum())} contact samples (< {MIN_CONTACT_SAMPLES})"
+    elif f.max() <= RIG_FIT_THRESHOLD_GF:
+        reason = f"raw reading never exceeds {RIG_FIT_THRESHOLD_GF:g} gf (the rig analysis' fit threshold)"
+    elif fit is None or fit.slope <= 0:
+        reason = "no positive slope"
+    elif fit.r2 < MIN_R2:
+        reason = f"poor linear fit (R^2 = {fit.r2:.2f} < {MIN_R2})"
+    if fit is None:
+        return FieldFit(float("nan"), float("nan"), float("nan"), usable=False, reason=reason or "no fit", **base)
+    rms = float(np.sqrt(np.mean((fs - fit.intercept - fit.slope * xs) ** 2)))
+    return FieldFit(fit.slope if not reason else float("nan"), fit.r2, rms, usable=not reason, reason=reason, **base)

@@ -1,0 +1,155 @@
+"""Cane centreline geometry: Chaikin smoothing, arc length, greedy discretization.
+
+Implements the paper's Sec. III-B exactly: polylines smoothed with Chaikin
+(5 iterations, strength 0.35, as CloudCompare does), then discretized greedily:
+start with one link from end to end, query 100 uniform points along the curve,
+split at the farthest from the current chain, until the largest distance is at
+most 5 mm (or until a requested number of links).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+QUERY_POINTS = 100  # paper: "100 uniform points on the curve were queried"
+STRAIGHT_TOL = 1e-6  # m; a curve this close to its chord is treated as straight
+
+
+def chaikin(points: np.ndarray, iterations: int = 5, strength: float = 0.35) -> np.ndarray:
+    """Chaikin corner cutting of an open polyline, end points kept.
+
+    Each segment P0-P1 is replaced by the two points (1-w)P0 + wP1 and
+    wP0 + (1-w)P1 with w = ``strength`` (Chaikin's classic value is 0.25).
+    """
+    p = np.asarray(points, dtype=float)
+    w = float(strength)
+    for _ in range(iterations):
+        if len(p) < 3:
+            break
+        a, b = p[:-1], p[1:]
+        q = (1 - w) * a + w * b
+        r = w * a + (1 - w) * b
+        inner = np.empty((2 * len(a), 3))
+        inner[0::2], inner[1::2] = q, r
+        # keep the clamped base and the tip where they are
+        p = np.vstack([p[:1], inner[1:-1], p[-1:]])
+    return p
+
+
+@dataclass(frozen=True)
+class Curve:
+    """A polyline parametrised by arc length ``s`` from the base."""
+
+    points: np.ndarray
+    s: np.ndarray
+
+    @classmethod
+    def from_points(cls, points: np.ndarray) -> "Curve":
+        pts = np.asarray(points, dtype=float)
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        keep = np.concatenate([[True], seg > 1e-12])  # drop exact duplicates
+        pts = pts[keep]
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        return cls(pts, np.concatenate([[0.0], np.cumsum(seg)]))
+
+    @property
+    def length(self) -> float:
+        return float(self.s[-1])
+
+    def at(self, s: np.ndarray | float) -> np.ndarray:
+        """Points at arc length(s) ``s`` (clipped to the curve)."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length)
+        return np.stack([np.interp(s, self.s, self.points[:, k]) for k in range(3)], axis=-1)
+
+    def tangent(self, s: float) -> np.ndarray:
+        """Unit tangent of the segment containing ``s``."""
+        i = int(np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self.s) - 2))
+        t = self.points[i + 1] - self.points[i]
+        return t / np.linalg.norm(t)
+
+    def s_at_height(self, height: float) -> float | None:
+        """First arc length at which the curve reaches ``height`` (z), or None."""
+        z = self.points[:, 2]
+        for i in range(len(z) - 1):
+            z0, z1 = z[i], z[i + 1]
+            if (z0 - height) * (z1 - height) <= 0 and z0 != z1:
+                f = (height - z0) / (z1 - z0)
+                return float(self.s[i] + f * (self.s[i + 1] - self.s[i]))
+            if z0 == height:
+                return float(self.s[i])
+        if abs(z[-1] - height) < 1e-12:
+            return self.length
+        return None
+
+
+def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distances from points ``p`` (m, 3) to every segment a[k]-b[k]; shape (m, k)."""
+    ab = b - a  # (k, 3)
+    ap = p[:, None, :] - a[None, :, :]  # (m, k, 3)
+    denom = np.maximum(np.einsum("kj,kj->k", ab, ab), 1e-300)
+    t = np.clip(np.einsum("mkj,kj->mk", ap, ab) / denom, 0.0, 1.0)
+    closest = a[None] + t[..., None] * ab[None]
+    return np.linalg.norm(p[:, None, :] - closest, axis=-1)
+
+
+def chain_deviation(curve: Curve, nodes_s: np.ndarray, n_query: int = QUERY_POINTS) -> np.ndarray:
+    """Distance of ``n_query`` uniform curve points to the chain through ``nodes_s``."""
+    q = curve.at(np.linspace(0.0, curve.length, n_query))
+    nodes = curve.at(nodes_s)
+    return point_segment_distance(q, nodes[:-1], nodes[1:]).min(axis=1)
+
+
+def greedy_discretize(
+    curve: Curve,
+    max_deviation: float = 0.005,
+    segments: int | None = None,
+    min_segments: int = 1,
+) -> np.ndarray:
+    """Arc lengths of the chain's nodes (base ... tip), paper's greedy rule.
+
+    Parameters
+    ----------
+    curve : Curve
+        Smoothed centreline.
+    max_deviation : float
+        Stop when every query point is within this distance of the chain.
+    segments : int, optional
+        If given, split until exactly this many links instead.
+    min_segments : int
+        Never return fewer links than this.
+
+    Notes
+    -----
+    A straight curve has no farthest point to split at; it is divided into
+    equal links (``segments`` or ``min_segments`` of them). If a curved cane
+    needs more links than its curvature supplies, the longest link is halved.
+    """
+    L = curve.length
+    target = segments if segments is not None else None
+    q_s = np.linspace(0.0, L, QUERY_POINTS)
+    q = curve.at(q_s)
+    chord_dev = point_segment_distance(q, curve.at([0.0]), curve.at([L])).max()
+    if chord_dev <= STRAIGHT_TOL:
+        n = target if target is not None else max(1, min_segments)
+        return np.linspace(0.0, L, n + 1)
+
+    nodes = [0.0, L]
+    while True:
+        n_links = len(nodes) - 1
+        if target is not None and n_links >= target:
+            break
+        pts = curve.at(np.array(nodes))
+        d = point_segment_distance(q, pts[:-1], pts[1:]).min(axis=1)
+        k = int(np.argmax(d))
+        if target is None and d[k] <= max_deviation and n_links >= min_segments:
+            break
+        if d[k] > STRAIGHT_TOL and not np.any(np.isclose(nodes, q_s[k], atol=1e-12)):
+            nodes.append(float(q_s[k]))
+        else:  # nothing left to resolve: halve the longest link
+            arr = np.array(nodes)
+            j = int(np.argmax(np.diff(arr)))
+            nodes.append(float(0.5 * (arr[j] + arr[j + 1])))
+        nodes.sort()
+    return np.array(nodes)

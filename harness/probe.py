@@ -1,0 +1,162 @@
+"""The probe driver: one protocol, applied identically to every backend.
+
+The harness owns the setpoint schedule, the PID law (or hands the gains to an
+engine's implicit PID), the sampling, the force-limit stop and the checks
+that mark a trial failed: non-finite state, an engine's own divergence flag,
+runaway force or displacement, and chatter (probe still moving fast at the
+end of a step, which is how PyBullet's velocity clamp hides an explosion).
+Everything already sampled is kept when a trial fails.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .chain import Chain
+from .fit import LineFit, fit_line
+from .protocol import Protocol
+
+
+@dataclass
+class ProbeTrace:
+    """Samples of one probed trial (SI) and how it ended."""
+
+    displacement: list[float] = field(default_factory=list)
+    force: list[float] = field(default_factory=list)
+    setpoint: list[float] = field(default_factory=list)
+    status: str = "ok"
+    reason: str = ""
+    wall_s: float = 0.0
+    settings: dict[str, Any] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    def fail(self, reason: str) -> None:
+        self.status, self.reason = "failed", reason
+
+    def fit(self) -> LineFit | None:
+        return fit_line(np.array(self.displacement), np.array(self.force))
+
+
+class Diverged(Exception):
+    pass
+
+
+def _check(proto: Protocol, k: int, x: float, v: float, f: float, setpoint: float) -> None:
+    if not (math.isfinite(x) and math.isfinite(v) and math.isfinite(f)):
+        raise Diverged(f"non-finite state (NaN/inf) at step {k}")
+    if abs(f) > 100 * proto.force_limit_n or abs(x - setpoint) > 1.0:
+        raise Diverged(f"runaway at step {k}: force {f:.3g} N, displacement {x * 1e3:.3g} mm")
+
+
+def probe_static(model: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
+    """Sweep a static model through the protocol's displacement steps."""
+    tr = ProbeTrace()
+    t0 = time.perf_counter()
+    try:
+        for k in range(1, n_steps + 1):
+            sp = k * proto.step_m
+            f = float(model.solve(sp))
+            _check(proto, k, sp, 0.0, f, sp)
+            tr.displacement.append(sp)
+            tr.force.append(f)
+            tr.setpoint.append(sp)
+            if f >= proto.force_limit_n:
+                break
+    except Diverged as exc:
+        tr.fail(str(exc))
+    except Exception as exc:  # a solver that does not converge fails the trial, not the run
+        tr.fail(f"static solve failed at step {len(tr.force) + 1}: {type(exc).__name__}: {exc}")
+    try:
+        tr.extras["k_linear"] = float(model.linear_stiffness())
+    except NotImplementedError:
+        pass
+    tr.wall_s = time.perf_counter() - t0
+    return tr
+
+
+def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
+    """Run the displacement-controlled push on a dynamic simulation."""
+    tr = ProbeTrace()
+    t0 = time.perf_counter()
+    dt = sim.dt
+    per = proto.steps_per_sample(dt)
+    window = max(1, int(round(proto.settle_window_s / dt)))
+    use_native = proto.controller == "engine" and getattr(sim, "native_pid", False)
+    tr.extras["controller"] = "engine" if use_native else "harness"
+    kp, ki, kd = proto.kp, proto.ki, proto.kd
+    integral = 0.0
+    try:
+        for k in range(1, n_steps + 1):
+            sp = k * proto.step_m
+            vmax = 0.0
+            if use_native:
+                sim.set_setpoint(sp)
+                sim.advance(per - window)
+                # watch the tail of the step in ten slices
+                chunks = np.diff(np.linspace(0, window, 11).round().astype(int))
+                for c in chunks:
+                    if c:
+                        sim.advance(int(c))
+                    x, v = sim.read()
+                    vmax = max(vmax, abs(v))
+                f = sim.force()
+            else:
+                read, step = sim.read, sim.step
+                f = 0.0
+                for i in range(per):
+                    x, v = read()
+                    e = sp - x
+                    integral += e * dt
+                    f = kp * e + ki * integral - kd * v
+                    step(f)
+                    if i >= per - window and abs(v) > vmax:
+                        vmax = abs(v)
+                x, v = read()
+                # the force that holds the state just read
+                f = kp * (sp - x) + ki * integral - kd * v
+            _check(proto, k, x, v, f, sp)
+            bad = sim.health()
+            if bad:
+                raise Diverged(f"{bad} (step {k})")
+            if vmax > proto.max_settle_velocity:
+                raise Diverged(
+                    f"unsettled at step {k}: probe speed {vmax * 1e3:.3g} mm/s in the last "
+                    f"{proto.settle_window_s:g} s (chatter or instability)")
+            tr.displacement.append(float(x))
+            tr.force.append(float(f))
+            tr.setpoint.append(sp)
+            if f >= proto.force_limit_n:
+                break
+    except Diverged as exc:
+        tr.fail(str(exc))
+    except Exception as exc:  # engine errors (e.g. Exudyn's SolverError) fail the trial only
+        tr.fail(f"engine error at step {len(tr.force) + 1}: {type(exc).__name__}: {exc}")
+    finally:
+        tr.wall_s = time.perf_counter() - t0
+    return tr
+
+
+def run_probe(backend: Any, chain: Chain, proto: Protocol, n_steps: int) -> ProbeTrace:
+    """Build ``chain`` in ``backend`` and probe it for ``n_steps`` samples."""
+    t0 = time.perf_counter()
+    try:
+        if backend.kind == "static":
+            model = backend.build(chain)
+            tr = probe_static(model, proto, n_steps)
+        else:
+            sim = backend.build(chain, proto)
+            try:
+                tr = probe_dynamic(sim, proto, n_steps)
+            finally:
+                sim.close()
+    except Exception as exc:
+        tr = ProbeTrace()
+        tr.fail(f"build failed: {type(exc).__name__}: {exc}")
+    tr.wall_s = time.perf_counter() - t0
+    tr.settings = backend.settings(proto)
+    return tr

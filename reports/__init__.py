@@ -1,0 +1,1 @@
+"""Reports built from run folders (CSV/JSON only: no re-simulation)."""

@@ -1,0 +1,152 @@
+"""Build a run's report (PNG figures + HTML page) from its CSV and JSON files.
+
+Everything is read back from ``results.csv``, ``traces.csv``, ``field.csv``
+and ``run.json``, so any figure can be rebuilt without re-simulating:
+``canebench report RUN_DIR``.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+MARKERS = {1: "o", 2: "s", 3: "^"}
+
+
+def _height_class(df: pd.DataFrame) -> pd.Series:
+    """Low / Middle / High push point on each cane (by height rank)."""
+    rank = df.groupby("cane")["height_mm"].rank(method="first")
+    return rank.map({1.0: 30.0, 2.0: 60.0, 3.0: 110.0}).fillna(60.0)
+
+
+def stiffness_plot(res: pd.DataFrame, path: Path) -> Path:
+    """Paper Fig. 'doubleplot': simulated vs field stiffness per trial, log axes, 1:1 line."""
+    backends = sorted(res.backend.unique())
+    fig, axes = plt.subplots(1, len(backends), figsize=(5.2 * len(backends), 4.8), squeeze=False)
+    cmap = plt.get_cmap("tab10")
+    for ax, b in zip(axes[0], backends):
+        d = res[(res.backend == b) & (res.status == "ok")].copy()
+        if len(d):
+            d["size"] = _height_class(d)
+            cane_no = d.cane.str.extract(r"c(\d+)$")[0].astype(float).fillna(1).astype(int)
+            for (bush, cn), g in d.groupby([d.bush, cane_no]):
+                ax.scatter(g.k_field, g.k_sim, s=g["size"], marker=MARKERS.get(cn, "o"), color=cmap((bush - 1) % 10),
+                           edgecolor="k", linewidth=0.4, label=f"bush {bush}" if cn == 1 else None)
+            lo = min(d.k_field.min(), d.k_sim.min()) / 1.5
+            hi = max(d.k_field.max(), d.k_sim.max()) * 1.5
+            ax.plot([lo, hi], [lo, hi], "k--", lw=1, label="1:1")
+            ax.set_xlim(lo, hi)
+            ax.set_ylim(lo, hi)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("field stiffness (N/mm)")
+        ax.set_ylabel("simulated stiffness (N/mm)")
+        ax.set_title(f"{b}: marker = cane, size = push height")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def log_ratio_plot(res: pd.DataFrame, path: Path) -> Path:
+    """Paper Fig. 'logplot': ln(k_sim / k_field) per trial and backend."""
+    d = res[res.status == "ok"]
+    trials = list(dict.fromkeys(res.trial))
+    backends = sorted(d.backend.unique())
+    fig, ax = plt.subplots(figsize=(max(8, 0.22 * len(trials) * max(1, len(backends))), 4))
+    w = 0.8 / max(1, len(backends))
+    x = np.arange(len(trials))
+    for i, b in enumerate(backends):
+        g = d[d.backend == b].set_index("trial").reindex(trials)
+        ax.bar(x + (i - (len(backends) - 1) / 2) * w, g.log_ratio, width=w, label=b)
+    ax.axhline(0, color="k", lw=0.8)
+    ax.set_xticks(x)
+    ax.set_xticklabels(trials, rotation=90, fontsize=7)
+    ax.set_ylabel("ln(k_sim / k_field)")
+    ax.legend(fontsize=8)
+    ax.grid(True, axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def traces_plot(traces: pd.DataFrame, res: pd.DataFrame, path: Path, n: int = 6) -> Path:
+    """Force against displacement for a few trials: field samples and each backend."""
+    trials = list(dict.fromkeys(res.trial))[:: max(1, len(set(res.trial)) // n)][:n]
+    fig, axes = plt.subplots(1, len(trials), figsize=(3.2 * len(trials), 3), squeeze=False)
+    for ax, t in zip(axes[0], trials):
+        for b, g in traces[traces.trial == t].groupby("backend"):
+            style = dict(ls="none", marker=".", ms=3, color="k") if b == "field" else dict(lw=1.2)
+            ax.plot(g.displacement_mm, g.force_n, label=b, **style)
+        ax.set_title(t, fontsize=9)
+        ax.set_xlabel("displacement (mm)")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("force (N)")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def summary_table(res: pd.DataFrame) -> pd.DataFrame:
+    rows = []
+    for b, g in res.groupby("backend"):
+        ok = g[g.status == "ok"]
+        rows.append({
+            "backend": b, "trials": len(g), "scored": len(ok), "failed": int((g.status == "failed").sum()),
+            "unscored": int((g.status == "unscored").sum()),
+            "median |log ratio|": ok.log_ratio.abs().median(), "mean log ratio": ok.log_ratio.mean(),
+            "max |log ratio|": ok.log_ratio.abs().max(), "median wall s": g.wall_s.median(),
+            "total wall s": g.wall_s.sum(),
+        })
+    return pd.DataFrame(rows)
+
+
+def build_report(run_dir: Path) -> Path:
+    """Write figures and ``report.html`` into ``run_dir``; return the page path."""
+    run_dir = Path(run_dir)
+    res = pd.read_csv(run_dir / "results.csv")
+    traces = pd.read_csv(run_dir / "traces.csv") if (run_dir / "traces.csv").exists() else pd.DataFrame()
+    meta = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").exists() else {}
+    figs = [stiffness_plot(res, run_dir / "stiffness.png"), log_ratio_plot(res, run_dir / "log_ratio.png")]
+    if len(traces):
+        figs.append(traces_plot(traces, res, run_dir / "traces.png"))
+    summ = summary_table(res)
+    failed = res[res.status != "ok"][["trial", "backend", "status", "reason", "field_reason"]]
+    banner = ""
+    if meta.get("synthetic"):
+        banner = ('<p style="background:#fde;padding:8px;border:1px solid #c88"><b>SYNTHETIC DATA.</b> '
+                  'These trials come from the bundled generator (canebench.canes.generate), not from the field.</p>')
+    assumptions = "".join(f"<li>{html.escape(a)}</li>" for a in meta.get("assumptions", []))
+    per_trial = res[["trial", "backend", "k_sim", "k_field", "log_ratio", "status", "n_links", "n_samples", "wall_s"]]
+    settings = meta.get("backend_settings", {})
+    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>canebench report</title>
+<style>body{{font-family:sans-serif;max-width:1200px;margin:auto}} table{{border-collapse:collapse;font-size:12px}}
+td,th{{border:1px solid #ccc;padding:2px 6px}} img{{max-width:100%}}</style></head><body>
+<h1>canebench report</h1>{banner}
+<p>Dataset: <code>{html.escape(str(meta.get('dataset', '?')))}</code>; protocol <b>{html.escape(str(meta.get('protocol', {}).get('name', '?')))}</b>;
+engines {html.escape(json.dumps(meta.get('engines', {})))}; canebench {html.escape(str(meta.get('canebench', '?')))}
+(commit {html.escape(str(meta.get('git_commit')))}); created {html.escape(str(meta.get('created', '?')))}.</p>
+<h2>Assumptions</h2><ul>{assumptions or '<li>none recorded</li>'}</ul>
+<h2>Summary</h2>{summ.to_html(index=False, float_format=lambda v: f'{v:.4g}')}
+<h2>Stiffness per trial</h2><img src="stiffness.png"><h2>Log-ratio error</h2><img src="log_ratio.png">
+{'<h2>Force-displacement examples</h2><img src="traces.png">' if len(traces) else ''}
+<h2>Failed or unscored</h2>{failed.to_html(index=False) if len(failed) else '<p>none</p>'}
+<h2>Per trial</h2>{per_trial.to_html(index=False, float_format=lambda v: f'{v:.4g}')}
+<h2>Configuration</h2><pre>{html.escape(json.dumps({'model_config': meta.get('model_config'), 'protocol': meta.get('protocol'), 'backend_settings': settings}, indent=1))}</pre>
+</body></html>"""
+    out = run_dir / "report.html"
+    out.write_text(page)
+    return out
