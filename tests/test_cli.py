@@ -1,0 +1,86 @@
+"""End to end: the CLI writes the run folder, its provenance and its report."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from canebench.cli import main
+
+REQUIRED = ["trial", "cane", "backend", "protocol", "k_sim", "k_field", "log_ratio", "status", "wall_s"]
+
+
+def test_run_writes_results_report_and_provenance(tmp_path: Path):
+    out = tmp_path / "run"
+    assert main(["run", "--trials", "b2c*", "--out", str(out), "--jobs", "1", "--set", "segments=6"]) == 0
+    res = pd.read_csv(out / "results.csv")
+    assert set(REQUIRED) <= set(res.columns)
+    assert len(res) == 18 and set(res.backend) == {"mujoco", "pinocchio"}
+    ok = res[res.status == "ok"]
+    assert (ok.n_links == 6).all()
+    assert ((ok.log_ratio - (ok.k_sim / ok.k_field).apply(__import__("math").log)).abs() < 1e-12).all()
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["engines"]["mujoco"] and meta["engines"]["pinocchio"]
+    assert meta["protocol"]["name"] == "fast" and meta["model_config"]["segments"] == 6
+    assert meta["synthetic"] is True
+    assert "mujoco" in meta["backend_settings"] and meta["backend_settings"]["mujoco"]["integrator"] == "discrete"
+    for f in ("report.html", "stiffness.png", "log_ratio.png", "traces.png", "traces.csv", "field.csv"):
+        assert (out / f).exists(), f
+    html = (out / "report.html").read_text()
+    assert "SYNTHETIC" in html and "Summary" in html
+    # report rebuilds from the files alone
+    (out / "stiffness.png").unlink()
+    assert main(["report", str(out)]) == 0 and (out / "stiffness.png").exists()
+
+
+def test_bad_inputs_exit_2_with_message(tmp_path: Path, capsys):
+    assert main(["run", "--backends", "mujoco,nosuch", "--out", str(tmp_path / "x")]) == 2
+    assert "nosuch" in capsys.readouterr().err
+    assert main(["run", "--set", "modulus_pa=soft", "--out", str(tmp_path / "y")]) == 2
+    assert "modulus_pa" in capsys.readouterr().err
+    assert main(["run", "--field", str(tmp_path / "missing"), "--out", str(tmp_path / "z")]) == 2
+    assert main(["run", "--trials", "zzz*", "--out", str(tmp_path / "w")]) == 2
+
+
+def test_a_bad_cane_fails_its_trials_and_the_run_goes_on(tmp_path: Path):
+    import shutil
+
+    from canebench.dataset import bundled_dataset
+
+    d = tmp_path / "data"
+    shutil.copytree(bundled_dataset(), d)
+    y = d / "canes" / "b1c1.yaml"
+    y.write_text(y.read_text().replace("- height:", "- height: 9.0\n  bogus:", 1))
+    out = tmp_path / "run"
+    assert main(["run", "--field", str(d), "--out", str(out), "--trials", "b1c*", "--no-report"]) == 0
+    res = pd.read_csv(out / "results.csv")
+    bad = res[res.cane == "b1c1"]
+    assert len(bad) == 6 and (bad.status == "failed").all()
+    assert bad.reason.str.contains(r"b1c1.yaml: field 'calipers\[0\].height'").all()
+    assert (res[res.cane != "b1c1"].status == "ok").all()
+
+
+def test_malformed_yaml_stops_with_file_and_line(tmp_path: Path, capsys):
+    import shutil
+
+    from canebench.dataset import bundled_dataset
+
+    d = tmp_path / "data"
+    shutil.copytree(bundled_dataset(), d)
+    (d / "canes" / "b1c2.yaml").write_text("id: b1c2\npolyline: [[0, 0\n")
+    assert main(["run", "--field", str(d), "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert "b1c2.yaml" in err and "line" in err
+
+
+def test_backends_command_lists_versions(capsys):
+    assert main(["backends"]) == 0
+    out = capsys.readouterr().out
+    assert "mujoco" in out and "pinocchio" in out and "canebench.backends" in out
+
+
+def test_module_entry_point_runs():
+    r = subprocess.run([sys.executable, "-m", "canebench", "backends"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and "mujoco" in r.stdout

@@ -1,0 +1,55 @@
+"""Bundled synthetic data: labelled, complete, and its truth kept apart."""
+
+import re
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from canebench.dataset import load_dataset
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def test_bundled_layout_matches_the_field_campaign(bundled_trials):
+    assert len(bundled_trials) == 54
+    assert {t.bush for t in bundled_trials} == set(range(1, 7))
+    for cane_id in {t.cane.id for t in bundled_trials}:
+        ts = sorted((t for t in bundled_trials if t.cane.id == cane_id), key=lambda t: t.trial_no)
+        gaps = [ts[i].height_mm - ts[i + 1].height_mm for i in range(2)]
+        assert all(70 <= g <= 130 for g in gaps), (cane_id, gaps)  # about 100 mm apart, trial 1 highest
+    d = pd.Series([t.diameter_mm for t in bundled_trials])
+    assert 4.0 <= d.min() and d.max() <= 23.0  # the real table's range 4.4-22.6 mm
+
+
+def test_scoring_code_never_reads_the_truth():
+    for pkg in ("harness", "backends", "reports"):
+        for f in (REPO / pkg).rglob("*.py"):
+            assert "synthetic-truth" not in f.read_text() and "truth.json" not in f.read_text(), f
+
+
+def test_synthetic_trial_files_do_not_look_like_field_copies():
+    names = [p.name for p in (REPO / "canes" / "synthetic" / "trials").glob("*.csv")]
+    assert len(names) == 54
+    assert not any(re.fullmatch(r"bush_\d+_branch_\d+_trial_\d+\.csv", n) for n in names)
+
+
+@pytest.mark.field
+def test_field_dataset_builds_straight_canes(field_dir):
+    trials = load_dataset(field_dir)
+    assert len(trials) == 54
+    t = trials[0]
+    assert "straight vertical cane" in t.cane.provenance["assumptions"][0]
+    assert t.cane.polyline[0].tolist() == [0, 0, 0]
+
+
+@pytest.mark.field
+def test_field_run_scores_real_trials(field_dir, tmp_path):
+    from canebench.cli import main
+
+    out = tmp_path / "field"
+    assert main(["run", "--field", str(field_dir), "--out", str(out), "--trials", "b1c2*,b4c1t1", "--no-report"]) == 0
+    res = pd.read_csv(out / "results.csv")
+    assert (res[res.trial == "b4c1t1"].status == "unscored").all()
+    ok = res[res.status == "ok"]
+    assert len(ok) == 6 and ok.k_field.between(0.01, 1.5).all()

@@ -1,0 +1,122 @@
+"""Rig CSV reader and field stiffness extraction: every real trial, synthetic
+trials against their hidden truth, and malformed input."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from canebench.errors import InputError
+from canebench.field import extract_field_stiffness, read_rig_csv
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.field
+def test_every_real_trial_reads_and_fits(field_dir):
+    pp = pd.read_csv(field_dir / "push_points.csv")
+    assert len(pp) == 54
+    usable = {}
+    for r in pp.itertuples():
+        tr = read_rig_csv(field_dir / r.file)
+        assert np.all(np.diff(tr.time_s) > 0), f"{r.file}: time not unwrapped"
+        assert tr.height_mm == r.height_mm
+        ff = extract_field_stiffness(tr)
+        key = (r.bush, r.cane, r.trial)
+        usable[key] = ff
+        if ff.usable:
+            # README: stiffness from a linear fit ranges about 0.017 to 1.27 N/mm
+            assert 0.01 < ff.k_n_per_mm < 1.5, (key, ff.k_n_per_mm)
+            assert ff.r2 >= 0.8 and ff.n_contact >= 5
+            # a contact force must start near zero after tare removal
+            assert abs(ff.force_n[0]) < 0.25
+        else:
+            assert ff.reason
+    # README: bush 4 cane 1 trial 1 never rises above 20 gf: no usable slope
+    assert not usable[(4, 1, 1)].usable
+    assert "20 gf" in usable[(4, 1, 1)].reason
+    assert sum(f.usable for f in usable.values()) >= 48
+
+
+@pytest.mark.field
+def test_time_stamp_wrap_is_unwrapped(field_dir):
+    # bush_1_branch_1_trial_1 crosses +32767 -> -32768 between samples
+    raw = pd.read_csv(field_dir / "trials/bush_1_branch_1_trial_1.csv")["Time Stamp"].to_numpy()
+    tr = read_rig_csv(field_dir / "trials/bush_1_branch_1_trial_1.csv")
+    if np.any(np.diff(raw) < 0):
+        np.testing.assert_allclose(np.diff(tr.time_s), 0.5)
+
+
+def test_synthetic_extraction_recovers_truth(bundled_trials):
+    """The extraction (tare, dead zone, noise, force limit) against the
+    generator's truth: within 5 % of the truth's linear stiffness, where
+    5 % covers load-cell noise on short trials and the truth's geometric
+    and gravity nonlinearity over up to 44 mm of push."""
+    from canebench.run import field_fit_for
+
+    truth = json.loads((REPO / "canes" / "synthetic-truth" / "truth.json").read_text())
+    errs = []
+    for t in bundled_trials:
+        ff = field_fit_for(t)
+        if not ff.usable:
+            continue
+        kt = truth["canes"][t.cane.id]["trials"][t.push_id]["k_linear_n_per_mm"]
+        errs.append(ff.k_n_per_mm / kt - 1)
+    assert len(errs) >= 50
+    assert np.max(np.abs(errs)) < 0.05
+    assert abs(np.median(errs)) < 0.01
+
+
+def _write(tmp_path, text):
+    p = tmp_path / "t.csv"
+    p.write_text(text)
+    return p
+
+
+HEADER = "Iteration,Time Stamp,Load Cell Reading (gf),Displacement (mm),Height (mm)\n"
+
+
+def test_missing_column_named(tmp_path):
+    p = _write(tmp_path, "Iteration,Time Stamp,Displacement (mm),Height (mm)\n1,0,0,800\n2,500,0.5,800\n")
+    with pytest.raises(InputError) as e:
+        read_rig_csv(p)
+    assert e.value.field == "Load Cell Reading (gf)" and "t.csv" in str(e.value)
+
+
+def test_nan_row_named(tmp_path):
+    p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,nan,10.5,800\n3,1000,4,11,800\n")
+    with pytest.raises(InputError, match=r"row 3") as e:
+        read_rig_csv(p)
+    assert e.value.field == "Load Cell Reading (gf)"
+
+
+def test_non_numeric_and_non_monotonic(tmp_path):
+    p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,abc,10.5,800\n")
+    with pytest.raises(InputError, match="not a finite number"):
+        read_rig_csv(p)
+    p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,4,10,800\n3,1000,4,11,800\n")
+    with pytest.raises(InputError, match="does not increase"):
+        read_rig_csv(p)
+
+
+def test_clean_synthetic_ramp_recovered_exactly(tmp_path):
+    # flat dead zone (tare -50 gf) for 6 samples, then 3 gf per 0.5 mm
+    rows, t = [], 32000
+    for i in range(40):
+        f = -50.0 + (max(0, i - 5) * 3.0)
+        rows.append(f"{i + 2},{(t + 32768) % 65536 - 32768},{f},{100 + 0.5 * i},700")
+        t += 500
+    tr = read_rig_csv(_write(tmp_path, HEADER + "\n".join(rows) + "\n"))
+    ff = extract_field_stiffness(tr)
+    assert ff.usable
+    assert ff.k_n_per_mm == pytest.approx(6.0 * 9.80665e-3, rel=1e-9)  # 6 gf/mm
+    assert ff.tare_gf == pytest.approx(-50.0)
+    assert ff.onset_mm == pytest.approx(2.5)
+
+
+def test_raw_reading_below_rig_threshold_is_unusable(tmp_path):
+    rows = [f"{i + 2},{500 * i},{-50.0 + max(0, i - 5) * 1.0},{0.5 * i},700" for i in range(40)]
+    ff = extract_field_stiffness(read_rig_csv(_write(tmp_path, HEADER + "\n".join(rows) + "\n")))
+    assert not ff.usable and "20 gf" in ff.reason
