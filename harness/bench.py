@@ -19,7 +19,7 @@ from .registry import get_backend
 from .run import field_fit_for
 
 
-def bench_protocols(trials: str = "b1c1t1,b3c2t2,b5c3t1", backends: list[str] | None = None,
+def bench_protocols(trials: str = "b1c1t1,b1c2t1,b3c1t2", backends: list[str] | None = None,
                     steps: int | None = None, config: ModelConfig | None = None) -> pd.DataFrame:
     config = config or ModelConfig()
     backends = backends or ["mujoco"]

@@ -152,7 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.set_defaults(fn=cmd_generate)
 
     be = sub.add_parser("bench", help="benchmark: paper vs fast protocol (stiffness difference, speed-up)")
-    be.add_argument("--trials", default="b1c1t1,b3c2t2,b5c3t1", help="trial globs on the bundled dataset")
+    be.add_argument("--trials", default="b1c1t1,b1c2t1,b3c1t2", help="trial globs on the bundled dataset")
     be.add_argument("--backends", default="mujoco")
     be.add_argument("--steps", type=int, default=None, help="protocol steps per trial (default: full trial)")
     be.set_defaults(fn=cmd_bench)
