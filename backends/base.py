@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import importlib
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar
+from typing import Any, Callable, ClassVar
 
 from canebench.chain import Chain
 from canebench.errors import BackendUnavailable
@@ -83,6 +83,24 @@ class Simulation(ABC):
     @abstractmethod
     def step(self, force: float) -> None:
         """Apply ``force`` (N) along the probe direction at the probe point for one step."""
+
+    def run_controlled(self, controller: Callable[[float, float], float], n_steps: int, tail: int) -> float:
+        """Advance ``n_steps`` applying ``controller(x, v)`` (the harness PID),
+        evaluated from the state at the start of each step. Return the largest
+        probe speed seen in the last ``tail`` steps (the harness's chatter check).
+
+        Override to run the loop inside the engine (e.g. a pre-step callback);
+        the control law stays the harness's.
+        """
+        vmax = 0.0
+        read, step = self.read, self.step
+        start_tail = n_steps - tail
+        for i in range(n_steps):
+            x, v = read()
+            step(controller(x, v))
+            if i >= start_tail and abs(v) > vmax:
+                vmax = abs(v)
+        return vmax
 
     def set_setpoint(self, setpoint: float) -> None:  # pragma: no cover - optional
         raise NotImplementedError

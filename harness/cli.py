@@ -80,6 +80,66 @@ def cmd_run(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_agree(a: argparse.Namespace) -> int:
+    import pandas as pd
+
+    from .agreement import REFERENCE, agreement_table, baseline_path, check, pairwise
+    from .dataset import bundled_dataset, load_dataset
+    from .protocol import get_protocol
+    from .registry import discover, select
+    from .run import provenance, run_trials, write_run
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reg = discover()
+    names = [n.strip() for n in a.backends.split(",")] if a.backends else sorted(reg)
+    if REFERENCE not in names:
+        names.append(REFERENCE)
+    usable, skipped = select(names)
+    for n, why in skipped.items():
+        print(f"skipping backend {n}: {why}", file=sys.stderr)
+    proto = get_protocol(a.protocol)
+    trials = load_dataset(Path(a.field) if a.field else bundled_dataset(), a.trials)
+    out = Path(a.out) if a.out else Path("canebench-runs") / _dt.datetime.now().strftime("agree-%Y%m%d-%H%M%S")
+    print(f"canebench agree: {len(trials)} trials x {len(usable)} backends ({','.join(usable)}), protocol {proto.name}")
+    t0 = time.perf_counter()
+    res, traces, fields = run_trials(trials, usable, proto, ModelConfig(), out, jobs=a.jobs, progress=_progress)
+    meta = provenance(usable, proto, ModelConfig(), {"command": " ".join(sys.argv), "skipped_backends": skipped,
+                                                      "synthetic": True, "wall_s": time.perf_counter() - t0})
+    write_run(out, res, traces, fields, meta)
+    table = agreement_table(res)
+    table.to_csv(out / "agreement.csv", index=False)
+    pairs = pairwise(res)
+    pairs.to_csv(out / "pairwise.csv", index=False)
+    print("\nstiffness relative to pinocchio (max |k/k_ref - 1| per backend):")
+    for b, g in table.groupby("backend"):
+        ok = g[g.status.isin(["ok", "unscored"])]
+        print(f"  {b:10s} max {ok.rel_to_ref.abs().max():.2e}  median {ok.rel_to_ref.abs().median():.2e}  "
+              f"failed {int((~g.status.isin(['ok', 'unscored'])).sum())}/{len(g)}  wall {g.wall_s.sum():.1f} s")
+    print("\npairwise |ln(k_a/k_b)|:")
+    print(pairs.to_string(index=False, float_format=lambda v: f"{v:.2e}"))
+    bpath = Path(a.baseline) if a.baseline else baseline_path(proto.name)
+    if a.update_baseline:
+        bpath.parent.mkdir(parents=True, exist_ok=True)
+        table[["trial", "backend", "protocol", "k_sim", "status", "reason"]].to_csv(bpath, index=False)
+        print(f"baseline written: {bpath}")
+        return 0
+    baseline = pd.read_csv(bpath) if bpath.exists() else None
+    if baseline is None:
+        print(f"no baseline at {bpath}: checking against {REFERENCE} only")
+    gate = check(table, baseline)
+    gate.violations.to_csv(out / "violations.csv", index=False)
+    from canebench.reports.build import build_report
+
+    build_report(out)
+    if gate.ok:
+        print(f"\nagreement gate: PASS ({len(table)} trial x backend results)")
+        return 0
+    print(f"\nagreement gate: FAIL, {len(gate.violations)} violation(s):")
+    print(gate.violations.to_string(index=False, float_format=lambda v: f"{v:.3e}"))
+    return 1
+
+
 def cmd_report(a: argparse.Namespace) -> int:
     from canebench.reports.build import build_report
 
@@ -141,6 +201,17 @@ def build_parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("report", help="rebuild the report of a run folder from its CSVs")
     rp.add_argument("run_dir")
     rp.set_defaults(fn=cmd_report)
+
+    ag = sub.add_parser("agree", help="probe bundled trials on every backend; agreement matrix and regression gate")
+    ag.add_argument("--backends", help="comma-separated (default: every registered backend)")
+    ag.add_argument("--protocol", default="fast")
+    ag.add_argument("--trials", help="trial globs (default: all 54)")
+    ag.add_argument("--field", help="dataset directory (default: bundled synthetic set)")
+    ag.add_argument("--out", help="output folder")
+    ag.add_argument("--baseline", help="baseline CSV (default: reports/baselines/agreement_<protocol>.csv)")
+    ag.add_argument("--update-baseline", action="store_true", help="write the baseline instead of checking")
+    ag.add_argument("--jobs", type=int, default=default_jobs())
+    ag.set_defaults(fn=cmd_agree)
 
     b = sub.add_parser("backends", help="list registered backends, versions, availability")
     b.add_argument("-v", "--verbose", action="store_true", help="show each backend's configuration per protocol")

@@ -19,7 +19,7 @@ import numpy as np
 
 from .chain import Chain
 from .fit import LineFit, fit_line
-from .protocol import Protocol
+from .protocol import PID, Protocol
 
 
 @dataclass
@@ -88,8 +88,7 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
     window = max(1, int(round(proto.settle_window_s / dt)))
     use_native = proto.controller == "engine" and getattr(sim, "native_pid", False)
     tr.extras["controller"] = "engine" if use_native else "harness"
-    kp, ki, kd = proto.kp, proto.ki, proto.kd
-    integral = 0.0
+    pid = PID(proto, dt)
     try:
         for k in range(1, n_steps + 1):
             sp = k * proto.step_m
@@ -106,19 +105,10 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
                     vmax = max(vmax, abs(v))
                 f = sim.force()
             else:
-                read, step = sim.read, sim.step
-                f = 0.0
-                for i in range(per):
-                    x, v = read()
-                    e = sp - x
-                    integral += e * dt
-                    f = kp * e + ki * integral - kd * v
-                    step(f)
-                    if i >= per - window and abs(v) > vmax:
-                        vmax = abs(v)
-                x, v = read()
-                # the force that holds the state just read
-                f = kp * (sp - x) + ki * integral - kd * v
+                pid.setpoint = sp
+                vmax = sim.run_controlled(pid, per, window)
+                x, v = sim.read()
+                f = pid.output(x, v)  # the force that holds the state just read
             _check(proto, k, x, v, f, sp)
             bad = sim.health()
             if bad:
@@ -145,15 +135,15 @@ def run_probe(backend: Any, chain: Chain, proto: Protocol, n_steps: int) -> Prob
     """Build ``chain`` in ``backend`` and probe it for ``n_steps`` samples."""
     t0 = time.perf_counter()
     try:
-        if backend.kind == "static":
-            model = backend.build(chain)
-            tr = probe_static(model, proto, n_steps)
+        built = backend.build(chain) if backend.kind == "static" else backend.build(chain, proto)
+        # a dynamic backend may answer a protocol with a static model (a quasi-static scheme)
+        if hasattr(built, "solve"):
+            tr = probe_static(built, proto, n_steps)
         else:
-            sim = backend.build(chain, proto)
             try:
-                tr = probe_dynamic(sim, proto, n_steps)
+                tr = probe_dynamic(built, proto, n_steps)
             finally:
-                sim.close()
+                built.close()
     except Exception as exc:
         tr = ProbeTrace()
         tr.fail(f"build failed: {type(exc).__name__}: {exc}")

@@ -89,3 +89,27 @@ def get_protocol(name: str) -> Protocol:
     if name not in PROTOCOLS:
         raise InputError("--protocol", "protocol", f"unknown protocol {name!r}; known: {', '.join(PROTOCOLS)}")
     return PROTOCOLS[name]
+
+
+class PID:
+    """The protocol's control law, evaluated once per step by the harness.
+
+    ``force = kp e + ki I - kd v`` with e = setpoint - x, I the running sum of
+    e dt (forward rectangle rule), v the measured probe velocity.
+    """
+
+    __slots__ = ("kp", "ki", "kd", "dt", "setpoint", "integral")
+
+    def __init__(self, proto: Protocol, dt: float) -> None:
+        self.kp, self.ki, self.kd, self.dt = proto.kp, proto.ki, proto.kd, dt
+        self.setpoint = 0.0
+        self.integral = 0.0
+
+    def __call__(self, x: float, v: float) -> float:
+        e = self.setpoint - x
+        self.integral += e * self.dt
+        return self.kp * e + self.ki * self.integral - self.kd * v
+
+    def output(self, x: float, v: float) -> float:
+        """The force for state (x, v) without advancing the integral."""
+        return self.kp * (self.setpoint - x) + self.ki * self.integral - self.kd * v

@@ -23,6 +23,9 @@ ENTRY_POINT_GROUP = "canebench.backends"
 _BUILTIN = {
     "mujoco": "canebench.backends.mujoco_backend:MujocoBackend",
     "pinocchio": "canebench.backends.pinocchio_backend:PinocchioBackend",
+    "dart": "canebench.backends.dart_backend:DartBackend",
+    "exudyn": "canebench.backends.exudyn_backend:ExudynBackend",
+    "pybullet": "canebench.backends.pybullet_backend:PybulletBackend",
 }
 
 
