@@ -109,7 +109,7 @@ class ExudynSimulation(Simulation):
         s = self.sims = exu.SimulationSettings()
         s.solution.file.write = False
         s.timeIntegration.verboseMode = 0
-        s.displayComputationTime = False
+        s.show.computationTime = False
         s.timeIntegration.generalizedAlpha.spectralRadius = 1.0  # no numerical damping: the cane's own damping only
         s.timeIntegration.newton.useModifiedNewton = True
         self.t = 0.0

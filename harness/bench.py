@@ -1,12 +1,15 @@
-"""Benchmark: the paper protocol (40 kHz) against the fast one, same process.
+"""Benchmarks measured in one process: ratios, never absolute thresholds.
 
-Prints, per trial and backend, the stiffness from each protocol, their
-relative difference and the difference from the Pinocchio static answer, and
-the speed-up as a ratio of wall times measured in this run (no absolute
-timing is asserted anywhere).
+``bench_protocols`` probes a few bundled trials with every requested backend
+under the paper protocol (40 kHz) and the fast one, and prints per trial:
+the stiffness and its difference from the Pinocchio static answer, the
+fast/paper stiffness difference, each engine's wall time as a ratio to
+MuJoCo's in the same run and protocol, and each engine's paper/fast speed-up.
 """
 
 from __future__ import annotations
+
+import math
 
 import pandas as pd
 
@@ -23,6 +26,8 @@ def bench_protocols(trials: str = "b1c1t1,b1c2t1,b3c1t2", backends: list[str] | 
                     steps: int | None = None, config: ModelConfig | None = None) -> pd.DataFrame:
     config = config or ModelConfig()
     backends = backends or ["mujoco"]
+    if "mujoco" not in backends:
+        backends = ["mujoco", *backends]  # the baseline of every ratio
     ref = get_backend("pinocchio")
     rows = []
     for t in load_dataset(bundled_dataset(), trials):
@@ -30,30 +35,30 @@ def bench_protocols(trials: str = "b1c1t1,b1c2t1,b3c1t2", backends: list[str] | 
         ff = field_fit_for(t)
         n = min(PROTOCOLS["paper"].max_steps, ff.n_steps if ff else 90, steps or 90)
         k_ref = run_probe(ref, chain, PROTOCOLS["fast"], n).fit().slope
-        for b in backends:
-            be = get_backend(b)
-            out = {}
-            for pname in ("paper", "fast"):
-                tr = run_probe(be, chain, PROTOCOLS[pname], n)
-                fit = tr.fit()
-                out[pname] = (fit.slope if fit else float("nan"), tr.wall_s, tr.status)
-            row = {
-                "trial": t.id, "backend": b, "links": chain.n_links, "steps": n,
-                "k_paper_N/mm": out["paper"][0] * 1e-3, "k_fast_N/mm": out["fast"][0] * 1e-3,
-                "fast_vs_paper": out["fast"][0] / out["paper"][0] - 1,
-                "paper_vs_pin": out["paper"][0] / k_ref - 1, "fast_vs_pin": out["fast"][0] / k_ref - 1,
-                "wall_paper_s": out["paper"][1], "wall_fast_s": out["fast"][1],
-                "speedup": out["paper"][1] / out["fast"][1],
-            }
-            rows.append(row)
-            print(f"{t.id:8s} {b:8s} links={chain.n_links:2d} steps={n:2d}  k_paper={row['k_paper_N/mm']:.5g}  "
-                  f"k_fast={row['k_fast_N/mm']:.5g} N/mm  fast/paper-1={row['fast_vs_paper']:+.2e}  "
-                  f"paper/pin-1={row['paper_vs_pin']:+.2e}  fast/pin-1={row['fast_vs_pin']:+.2e}  "
-                  f"speed-up x{row['speedup']:.1f}", flush=True)
+        for pname in ("fast", "paper"):
+            for b in backends:
+                tr = run_probe(get_backend(b), chain, PROTOCOLS[pname], n)
+                fit = tr.fit() if tr.status == "ok" else None
+                rows.append({"trial": t.id, "links": chain.n_links, "steps": n, "protocol": pname, "backend": b,
+                             "k_N/mm": fit.slope * 1e-3 if fit else math.nan,
+                             "vs_pin": fit.slope / k_ref - 1 if fit else math.nan,
+                             "wall_s": tr.wall_s, "status": tr.status, "reason": tr.reason})
     df = pd.DataFrame(rows)
-    if len(df):
-        tot = df.groupby("backend")[["wall_paper_s", "wall_fast_s"]].sum()
-        for b, r in tot.iterrows():
-            print(f"{b}: total paper/fast wall-time ratio x{r.wall_paper_s / r.wall_fast_s:.1f}; "
-                  f"max |fast/paper-1| = {df[df.backend == b].fast_vs_paper.abs().max():.2e}")
+    mj = df[df.backend == "mujoco"].set_index(["trial", "protocol"]).wall_s
+    df["wall_vs_mujoco"] = [w / mj[(t, p)] for t, p, w in zip(df.trial, df.protocol, df.wall_s)]
+    k = df.pivot_table(index=["trial", "backend"], columns="protocol", values="k_N/mm")
+    w = df.pivot_table(index=["trial", "backend"], columns="protocol", values="wall_s")
+    pd.set_option("display.width", 200)
+    print(df.drop(columns=["reason"]).to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    for r in df[df.status != "ok"].itertuples():
+        print(f"  {r.trial} {r.protocol} {r.backend}: {r.status}: {r.reason}")
+    summary = pd.DataFrame({"fast_vs_paper_k": (k["fast"] / k["paper"] - 1), "paper_over_fast_wall": w["paper"] / w["fast"]})
+    print("\nper trial and backend: stiffness fast/paper - 1 and wall-time speed-up paper/fast")
+    print(summary.to_string(float_format=lambda v: f"{v:.3g}"))
+    tot = df.groupby(["protocol", "backend"]).wall_s.sum().unstack("protocol")
+    tot["paper/fast"] = tot["paper"] / tot["fast"]
+    tot["fast vs mujoco"] = tot["fast"] / tot.loc["mujoco", "fast"]
+    tot["paper vs mujoco"] = tot["paper"] / tot.loc["mujoco", "paper"]
+    print("\ntotals (s) and ratios, same process:")
+    print(tot.to_string(float_format=lambda v: f"{v:.3g}"))
     return df

@@ -224,7 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     be = sub.add_parser("bench", help="benchmark: paper vs fast protocol (stiffness difference, speed-up)")
     be.add_argument("--trials", default="b1c1t1,b1c2t1,b3c1t2", help="trial globs on the bundled dataset")
-    be.add_argument("--backends", default="mujoco")
+    be.add_argument("--backends", default="mujoco", help="comma-separated; MuJoCo is always included as the baseline")
     be.add_argument("--steps", type=int, default=None, help="protocol steps per trial (default: full trial)")
     be.set_defaults(fn=cmd_bench)
     return p

@@ -101,6 +101,66 @@ def traces_plot(traces: pd.DataFrame, res: pd.DataFrame, path: Path, n: int = 6)
     return path
 
 
+def comparison_plots(res: pd.DataFrame, run_dir: Path) -> list[Path]:
+    """Engine comparison: stiffness per engine and trial, the agreement matrix
+    against Pinocchio as a heat map, and wall time per engine and trial."""
+    from canebench.agreement import REFERENCE, agreement_table
+
+    trials = list(dict.fromkeys(res.trial))
+    backends = sorted(res.backend.unique())
+    paths = []
+    fig, ax = plt.subplots(figsize=(max(8, 0.2 * len(trials)), 4))
+    for b in backends:
+        g = res[res.backend == b].set_index("trial").reindex(trials)
+        ax.plot(range(len(trials)), g.k_sim, marker="o", ms=3, lw=0.8, label=b)
+    ax.set_yscale("log")
+    ax.set_xticks(range(len(trials)))
+    ax.set_xticklabels(trials, rotation=90, fontsize=7)
+    ax.set_ylabel("k_sim (N/mm)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    paths.append(run_dir / "engines_stiffness.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+
+    if REFERENCE in backends:
+        tab = agreement_table(res)
+        others = [b for b in backends if b != REFERENCE]
+        M = tab.pivot(index="backend", columns="trial", values="rel_to_ref").reindex(index=others, columns=trials)
+        failed = tab.assign(bad=~tab.status.isin(["ok", "unscored"])).pivot(
+            index="backend", columns="trial", values="bad").reindex(index=others, columns=trials)
+        val = np.log10(np.clip(M.abs().to_numpy(dtype=float), 1e-9, None))
+        fig, ax = plt.subplots(figsize=(max(8, 0.2 * len(trials)), 0.5 * len(others) + 1.6))
+        im = ax.imshow(val, aspect="auto", cmap="viridis", vmin=-8, vmax=-1)
+        for (i, j), bad in np.ndenumerate(failed.to_numpy(dtype=bool)):
+            if bad:
+                ax.text(j, i, "x", ha="center", va="center", color="red", fontsize=8)
+        ax.set_yticks(range(len(others)))
+        ax.set_yticklabels(others)
+        ax.set_xticks(range(len(trials)))
+        ax.set_xticklabels(trials, rotation=90, fontsize=7)
+        fig.colorbar(im, ax=ax, label=f"log10 |k / k_{REFERENCE} - 1|   (x = failed)")
+        fig.tight_layout()
+        paths.append(run_dir / "agreement_heatmap.png")
+        fig.savefig(paths[-1], dpi=100)
+        plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    data = [res[res.backend == b].wall_s.to_numpy() for b in backends]
+    ax.boxplot(data, tick_labels=backends)
+    for i, d in enumerate(data, start=1):
+        ax.plot(np.full(len(d), i) + np.random.default_rng(0).uniform(-0.15, 0.15, len(d)), d, ".", ms=3, alpha=0.6)
+    ax.set_yscale("log")
+    ax.set_ylabel("wall time per trial (s)")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    paths.append(run_dir / "wall_time.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+    return paths
+
+
 def summary_table(res: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for b, g in res.groupby("backend"):
@@ -124,6 +184,32 @@ def build_report(run_dir: Path) -> Path:
     figs = [stiffness_plot(res, run_dir / "stiffness.png"), log_ratio_plot(res, run_dir / "log_ratio.png")]
     if len(traces):
         figs.append(traces_plot(traces, res, run_dir / "traces.png"))
+    comparison = ""
+    if res.backend.nunique() > 1:
+        cmp_figs = comparison_plots(res, run_dir)
+        from canebench.agreement import REFERENCE, agreement_table, pairwise
+
+        pairs = pairwise(res)
+        tab = agreement_table(res) if REFERENCE in set(res.backend) else None
+        per_backend = ""
+        if tab is not None:
+            ok = tab[tab.status.isin(["ok", "unscored"])]
+            agg = ok.groupby("backend").rel_to_ref.agg(lambda v: v.abs().max()).rename("max |k/k_ref - 1|")
+            fails = tab.groupby("backend").status.agg(lambda v: int((~v.isin(["ok", "unscored"])).sum()))
+            per_backend = pd.concat([agg, fails.rename("failed")], axis=1).to_html(float_format=lambda v: f"{v:.2e}")
+        settings = meta.get("backend_settings", {})
+        config_rows = "".join(
+            f"<tr><td>{html.escape(b)}</td><td>{html.escape(str(st.get('integrator')))}</td>"
+            f"<td>{html.escape(str(st.get('dt')))}</td><td>{html.escape(str(st.get('springs')))}</td>"
+            f"<td>{html.escape(str(st.get('pid')))}</td><td>{html.escape(str(st.get('why')))}</td></tr>"
+            for b, st in settings.items())
+        comparison = (
+            "<h2>Engine comparison</h2>"
+            "<table><tr><th>backend</th><th>integrator</th><th>dt</th><th>springs</th><th>PID</th><th>why</th></tr>"
+            f"{config_rows}</table>"
+            f"<h3>Against the exact statics</h3>{per_backend}"
+            f"<h3>Pairwise |ln(k_a/k_b)|</h3>{pairs.to_html(index=False, float_format=lambda v: f'{v:.2e}')}"
+            + "".join(f'<h3>{p.stem.replace("_", " ")}</h3><img src="{p.name}">' for p in cmp_figs))
     summ = summary_table(res)
     failed = res[res.status != "ok"][["trial", "backend", "status", "reason", "field_reason"]]
     banner = ""
@@ -144,6 +230,7 @@ engines {html.escape(json.dumps(meta.get('engines', {})))}; canebench {html.esca
 <h2>Summary</h2>{summ.to_html(index=False, float_format=lambda v: f'{v:.4g}')}
 <h2>Stiffness per trial</h2><img src="stiffness.png"><h2>Log-ratio error</h2><img src="log_ratio.png">
 {'<h2>Force-displacement examples</h2><img src="traces.png">' if len(traces) else ''}
+{comparison}
 <h2>Failed or unscored</h2>{failed.to_html(index=False) if len(failed) else '<p>none</p>'}
 <h2>Per trial</h2>{per_trial.to_html(index=False, float_format=lambda v: f'{v:.4g}')}
 <h2>Configuration</h2><pre>{html.escape(json.dumps({'model_config': meta.get('model_config'), 'protocol': meta.get('protocol'), 'backend_settings': settings}, indent=1))}</pre>
