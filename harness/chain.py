@@ -11,6 +11,7 @@ point, which is clamped.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 from dataclasses import dataclass, field
@@ -22,8 +23,32 @@ from .cane import CaneDescription, Location
 from .config import ModelConfig
 from .diameter import fit_diameter
 from .errors import InputError
-from .geometry import Curve, chaikin, greedy_discretize
-from .stiffness import joint_stiffness
+from .geometry import Curve, chaikin, greedy_discretize, uniform_discretize
+from .stiffness import StiffnessContext, joint_stiffness
+
+
+@dataclass(frozen=True)
+class RodGeometry:
+    """The continuous rod a chain approximates (for the beam reference).
+
+    ``points`` is the smoothed centreline the chain was cut from, ``s`` its
+    arc length; the diameter is the same fitted line (with the same factor
+    and floor) the chain evaluates at link midpoints, here continuous.
+    """
+
+    points: np.ndarray
+    s: np.ndarray
+    s_centroid: float
+    d_centroid: float
+    slope: float  # already multiplied by the diameter factor
+    min_diameter: float
+    modulus: float
+    density: float
+    poisson_ratio: float
+
+    def diameter(self, s: np.ndarray) -> np.ndarray:
+        s = np.asarray(s, float)
+        return np.maximum(self.d_centroid + self.slope * (s - self.s_centroid), self.min_diameter)
 
 
 @dataclass(frozen=True)
@@ -69,6 +94,7 @@ class Chain:
     gravity: np.ndarray
     modulus: float
     meta: dict[str, Any] = field(default_factory=dict)
+    rod: RodGeometry | None = None
 
     @property
     def n_links(self) -> int:
@@ -166,7 +192,15 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
     config = config or ModelConfig()
     src = cane.source
     curve = cane_curve(cane, config)
-    nodes_s = greedy_discretize(curve, config.max_deviation_m, config.segments, config.min_segments)
+    pp = cane.push_point(push_id)
+    pidx = cane.push_points.index(pp)
+    s_push = resolve_s(curve, pp.where, src, f"push_points[{pidx}]")
+    fixed = (s_push,) if config.node_at_push else ()
+    if config.discretization == "uniform":
+        n = config.segments or max(config.min_segments, 1)
+        nodes_s = uniform_discretize(curve, n, fixed)
+    else:
+        nodes_s = greedy_discretize(curve, config.max_deviation_m, config.segments, config.min_segments, fixed)
     nodes = curve.at(nodes_s)
 
     cal_s = np.array([resolve_s(curve, c.where, src, f"calipers[{i}]") for i, c in enumerate(cane.calipers)])
@@ -181,9 +215,6 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
     rho = config.density if config.density is not None else cane.material.density
     damping = config.damping if config.damping is not None else cane.material.joint_damping
 
-    pp = cane.push_point(push_id)
-    pidx = cane.push_points.index(pp)
-    s_push = resolve_s(curve, pp.where, src, f"push_points[{pidx}]")
     link = int(np.clip(np.searchsorted(nodes_s, s_push, side="left") - 1, 0, len(nodes_s) - 2))
     point = curve.at(s_push)
     u = probe_direction(np.array(pp.direction), curve.tangent(s_push), config.probe_angle_deg)
@@ -205,13 +236,18 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
         "warnings": warnings,
         "synthetic": bool(cane.provenance.get("synthetic", False)),
     }
-    return assemble_chain(nodes, diam, E, rho, damping, config.stiffness_formula, link, point, u,
-                          config.gravity, meta, src)
+    rod = RodGeometry(curve.points, curve.s, fit.s_centroid, fit.d_centroid, fit.factor * fit.slope,
+                      config.min_diameter_m, float(E), float(rho), config.poisson_ratio)
+    ctx = StiffnessContext(nodes_s, lambda s: rod.modulus * np.pi * rod.diameter(s) ** 4 / 64.0)
+    chain = assemble_chain(nodes, diam, E, rho, damping, config.stiffness_formula, link, point, u,
+                           config.gravity, meta, src, ctx)
+    return dataclasses.replace(chain, rod=rod)
 
 
 def assemble_chain(nodes: np.ndarray, diameters: np.ndarray, modulus: float, density: float, damping: float,
                    formula: str, push_link: int, push_point: np.ndarray, direction: np.ndarray,
-                   gravity: float, meta: dict[str, Any] | None = None, source: str = "<memory>") -> Chain:
+                   gravity: float, meta: dict[str, Any] | None = None, source: str = "<memory>",
+                   stiffness_context: StiffnessContext | None = None) -> Chain:
     """Rigid solid-cylinder links between ``nodes`` with springs by ``formula``.
 
     The physical half of :func:`build_chain`, also used directly to build
@@ -225,7 +261,7 @@ def assemble_chain(nodes: np.ndarray, diameters: np.ndarray, modulus: float, den
     frames = _parallel_transport_frames(vec / lengths[:, None])
     diam = np.asarray(diameters, float)
     I_area = np.pi * diam**4 / 64.0
-    K = joint_stiffness(formula, modulus * I_area, lengths)
+    K = joint_stiffness(formula, modulus * I_area, lengths, stiffness_context)
     r = diam / 2.0
     masses = density * np.pi * r**2 * lengths
     inertias = np.column_stack([

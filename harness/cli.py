@@ -92,7 +92,10 @@ def cmd_agree(a: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         reg = discover()
-    names = [n.strip() for n in a.backends.split(",")] if a.backends else sorted(reg)
+    # by default every engine that simulates the chain; the continuum beam is
+    # a different model (see `canebench converge`), not an engine to agree with
+    names = ([n.strip() for n in a.backends.split(",")] if a.backends
+             else sorted(n for n, i in reg.items() if "continuum" not in i.tags))
     if REFERENCE not in names:
         names.append(REFERENCE)
     usable, skipped = select(names)

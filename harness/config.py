@@ -42,6 +42,13 @@ class ModelConfig:
     min_segments : int
         Fewest links the greedy rule returns (paper: 3, the fewest its
         algorithm produced; a straight cane would otherwise get one link).
+    discretization : str
+        ``greedy`` (the paper's farthest-point splitting) or ``uniform``
+        (equal links; ``segments`` of them, or ``min_segments``).
+    node_at_push : bool
+        Put a joint exactly at the probe point before the greedy splits
+        (off in the paper; with it, the beam-consistent chain converges at
+        second order at the probe instead of first).
     stiffness_formula : str
         Name in :data:`canebench.stiffness.FORMULAS` (``paper`` = 2EI/L).
     probe_angle_deg : float
@@ -52,6 +59,11 @@ class ModelConfig:
         Smoothing of raw polylines (paper: 5 iterations, strength 0.35).
     min_diameter_m : float
         Floor for extrapolated diameters; links clamped to it are reported.
+    poisson_ratio : float
+        nu for the beam reference's torsion, GJ = EI / (1 + nu) (the chains
+        have no twist joint). 0.3 is a typical value for green wood.
+    beam_elements : int
+        RK4 elements of the beam reference (its mesh-refinement parameter).
     effects : tuple of str
         Names of extra physical effects (pluggable; empty reproduces the paper).
     """
@@ -63,12 +75,16 @@ class ModelConfig:
     segments: int | None = None
     max_deviation_m: float = 0.005
     min_segments: int = 3
+    node_at_push: bool = False
+    discretization: str = "greedy"
     stiffness_formula: str = "paper"
     probe_angle_deg: float = 0.0
     gravity: float = 9.81
     chaikin_iterations: int = 5
     chaikin_strength: float = 0.35
     min_diameter_m: float = 1.0e-3
+    poisson_ratio: float = 0.3
+    beam_elements: int = 48
     effects: tuple[str, ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:
@@ -96,6 +112,12 @@ class ModelConfig:
             raise InputError(source, "chaikin_strength", "strength must be in (0, 0.5], iterations >= 0")
         if not (self.min_diameter_m > 0):
             raise InputError(source, "min_diameter_m", "must be > 0")
+        if not (-1.0 < self.poisson_ratio < 0.5):
+            raise InputError(source, "poisson_ratio", "must be in (-1, 0.5)")
+        if self.discretization not in ("greedy", "uniform"):
+            raise InputError(source, "discretization", f"must be 'greedy' or 'uniform', got {self.discretization!r}")
+        if self.beam_elements < 2:
+            raise InputError(source, "beam_elements", "must be >= 2")
 
     def replace(self, **changes: Any) -> "ModelConfig":
         """A copy with some fields changed (validated)."""

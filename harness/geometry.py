@@ -101,11 +101,29 @@ def chain_deviation(curve: Curve, nodes_s: np.ndarray, n_query: int = QUERY_POIN
     return point_segment_distance(q, nodes[:-1], nodes[1:]).min(axis=1)
 
 
+def uniform_discretize(curve: Curve, segments: int, fixed: tuple[float, ...] = ()) -> np.ndarray:
+    """Node arc lengths for ``segments`` links of (nearly) equal length, with
+    the ``fixed`` arc lengths as nodes (links on each side stay equal)."""
+    L = curve.length
+    cuts = [0.0, *sorted(f for f in fixed if 1e-9 < f < L - 1e-9), L]
+    spans = np.diff(cuts)
+    # share the links between spans in proportion to their length (largest remainder)
+    raw = spans / L * segments
+    n = np.maximum(1, np.floor(raw).astype(int))
+    while n.sum() < segments:
+        n[np.argmax(raw - n)] += 1
+    while n.sum() > segments and np.any(n > 1):
+        n[np.argmax(np.where(n > 1, n - raw, -np.inf))] -= 1
+    out = [np.linspace(a, b, k + 1)[:-1] for a, b, k in zip(cuts[:-1], cuts[1:], n)]
+    return np.concatenate([*out, [L]])
+
+
 def greedy_discretize(
     curve: Curve,
     max_deviation: float = 0.005,
     segments: int | None = None,
     min_segments: int = 1,
+    fixed: tuple[float, ...] = (),
 ) -> np.ndarray:
     """Arc lengths of the chain's nodes (base ... tip), paper's greedy rule.
 
@@ -119,6 +137,8 @@ def greedy_discretize(
         If given, split until exactly this many links instead.
     min_segments : int
         Never return fewer links than this.
+    fixed : tuple of float
+        Arc lengths that must be nodes (e.g. the probe point), placed first.
 
     Notes
     -----
@@ -131,11 +151,12 @@ def greedy_discretize(
     q_s = np.linspace(0.0, L, QUERY_POINTS)
     q = curve.at(q_s)
     chord_dev = point_segment_distance(q, curve.at([0.0]), curve.at([L])).max()
-    if chord_dev <= STRAIGHT_TOL:
+    fixed = tuple(f for f in fixed if 1e-9 < f < L - 1e-9)
+    if chord_dev <= STRAIGHT_TOL and not fixed:
         n = target if target is not None else max(1, min_segments)
         return np.linspace(0.0, L, n + 1)
 
-    nodes = [0.0, L]
+    nodes = sorted([0.0, L, *fixed])
     while True:
         n_links = len(nodes) - 1
         if target is not None and n_links >= target:

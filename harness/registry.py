@@ -26,6 +26,7 @@ _BUILTIN = {
     "dart": "canebench.backends.dart_backend:DartBackend",
     "exudyn": "canebench.backends.exudyn_backend:ExudynBackend",
     "pybullet": "canebench.backends.pybullet_backend:PybulletBackend",
+    "beam": "canebench.backends.beam_backend:BeamBackend",
 }
 
 

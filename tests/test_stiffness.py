@@ -24,7 +24,7 @@ def test_formula_values():
     np.testing.assert_allclose(dual[1:], 3.0 / 0.5)  # interior: dual length = one link
 
 
-def test_dual_length_is_series_of_half_links():
+def test_dual_length_without_context_is_series_of_half_links():
     ei = np.array([4.0, 2.0])
     le = np.array([0.2, 0.3])
     k = joint_stiffness("dual_length", ei, le)
@@ -73,3 +73,12 @@ def test_reference_table_values():
         r2 = 1 / PinocchioStatic(straight_cantilever(n, "paper")).linear_stiffness() / beam
         assert r1 == pytest.approx(c1, abs=6e-5)  # table rounded to 4 decimals
         assert r2 == pytest.approx(c2, abs=6e-5)
+
+
+def test_dual_length_with_context_integrates_compliance_exactly():
+    from canebench.stiffness import StiffnessContext
+
+    # EI(s) = 1 + s on nodes 0, 1, 3: dual segments [0, 0.5] and [0.5, 2]
+    ctx = StiffnessContext(np.array([0.0, 1.0, 3.0]), lambda s: 1.0 + s)
+    k = joint_stiffness("dual_length", np.array([1.5, 3.0]), np.array([1.0, 2.0]), ctx)
+    np.testing.assert_allclose(k, [1 / np.log(1.5), 1 / np.log(3.0 / 1.5)], rtol=1e-12)
