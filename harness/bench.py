@@ -62,3 +62,26 @@ def bench_protocols(trials: str = "b1c1t1,b1c2t1,b3c1t2", backends: list[str] | 
     print("\ntotals (s) and ratios, same process:")
     print(tot.to_string(float_format=lambda v: f"{v:.3g}"))
     return df
+
+
+def bench_beam(trials: str = "b1c1t1,b3c1t2,b5c3t1,b6c2t3", config: ModelConfig | None = None) -> pd.DataFrame:
+    """One push point's full 90-step sweep with the beam backend (force limit
+    lifted so every step is solved), timed against the Pinocchio sweep of the
+    chain in the same process."""
+    config = config or ModelConfig()
+    proto = PROTOCOLS["fast"].replace(force_limit_n=float("inf"))
+    rows = []
+    for t in load_dataset(bundled_dataset(), trials):
+        chain = build_chain(t.cane, t.push_id, config)
+        res = {b: run_probe(get_backend(b), chain, proto, 90) for b in ("beam", "pinocchio")}
+        row = {"trial": t.id, "steps": len(res["beam"].force), "status": res["beam"].status,
+               "beam_s": res["beam"].wall_s, "pinocchio_s": res["pinocchio"].wall_s,
+               "beam/pinocchio": res["beam"].wall_s / res["pinocchio"].wall_s,
+               "k_beam": res["beam"].fit().slope * 1e-3 if res["beam"].fit() else math.nan,
+               "k_chain": res["pinocchio"].fit().slope * 1e-3}
+        rows.append(row)
+    df = pd.DataFrame(rows)
+    print(df.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    print(f"beam: slowest full 90-step sweep {df.beam_s.max():.2f} s; median {df['beam/pinocchio'].median():.1f}x "
+          f"the Pinocchio chain sweep in this run")
+    return df

@@ -1,0 +1,104 @@
+"""Figures and summary of the beam/chain convergence study (from CSV files)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import NullFormatter, ScalarFormatter  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from canebench.rodstudy import closed_form_ratio  # noqa: E402
+
+COLORS = {"paper": "tab:red", "end_angle": "tab:blue", "dual_length": "tab:green"}
+
+
+def _segment_axis(ax) -> None:
+    ax.set_xscale("log")
+    ax.set_xticks([3, 5, 10, 20, 40])
+    ax.xaxis.set_major_formatter(ScalarFormatter())
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
+def chain_plot(df: pd.DataFrame, path: Path) -> Path:
+    """k_chain / k_beam against segment count: the straight cantilevers (with
+    the closed forms dashed) and the bundled canes (median and range)."""
+    discs = sorted(df.discretization.unique())
+    fig, axes = plt.subplots(1, len(discs) + 1, figsize=(5.2 * (len(discs) + 1), 4.4), squeeze=False)
+    ax = axes[0][0]
+    for formula, g in df[df.trial.isin(["uniform-cantilever", "tapered-cantilever"])
+                         & (df.discretization == "uniform")].groupby("formula"):
+        for tid, h in g.groupby("trial"):
+            ls = "-" if tid.startswith("uniform") else ":"
+            ax.plot(h.segments, h.ratio, ls, marker="o", ms=3, color=COLORS.get(formula), label=f"{formula} ({tid.split('-')[0]})")
+        n = np.array(sorted(g.segments.unique()))
+        ax.plot(n, [1 / closed_form_ratio(formula, k) for k in n], "--", color="k", lw=0.7)
+    ax.axhline(1, color="k", lw=0.5)
+    _segment_axis(ax)
+    ax.set_title("straight cantilevers (dashed: closed forms)")
+    ax.set_xlabel("segments")
+    ax.set_ylabel("k_chain / k_beam (small deflection)")
+    ax.legend(fontsize=7)
+    canes = df[~df.trial.isin(["uniform-cantilever", "tapered-cantilever"])]
+    for ax, disc in zip(axes[0][1:], discs):
+        for formula, g in canes[canes.discretization == disc].groupby("formula"):
+            s = g.groupby("segments").ratio
+            ax.plot(s.median().index, s.median(), marker="o", ms=3, color=COLORS.get(formula), label=formula)
+            ax.fill_between(s.min().index, s.min(), s.max(), color=COLORS.get(formula), alpha=0.2)
+        ax.axhline(1, color="k", lw=0.5)
+        ax.axhspan(0.99, 1.01, color="k", alpha=0.08)
+        ax.set_yscale("log")
+        _segment_axis(ax)
+        ax.set_title(f"bundled canes, {disc} discretization (median, range)")
+        ax.set_xlabel("segments")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def rod_plot(df: pd.DataFrame, path: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(5, 4))
+    ax.loglog(df.elements, df.rel_error, "o-", label="tapered cantilever, tip deflection")
+    n = df.elements.to_numpy(float)
+    ax.loglog(n, df.rel_error.iloc[0] * (n / n[0]) ** -4, "k--", lw=0.8, label="slope -4")
+    ax.set_xlabel("RK4 elements")
+    ax.set_ylabel("relative error vs closed form")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def summary(df: pd.DataFrame, segments=(10, 20)) -> pd.DataFrame:
+    """Per formula and discretization, at 10 and 20 segments: the chain's
+    stiffness error against the beam over the bundled canes."""
+    canes = df[~df.trial.isin(["uniform-cantilever", "tapered-cantilever"])]
+    rows = []
+    for (disc, formula, n), g in canes[canes.segments.isin(segments)].groupby(["discretization", "formula", "segments"]):
+        err = g.ratio - 1
+        err_rigid = g.k_chain / g.k_beam_rigid_twist - 1
+        rows.append({"discretization": disc, "formula": formula, "segments": n, "trials": g.trial.nunique(),
+                     "median error": err.median(), "worst |error|": err.abs().max(),
+                     "within 1 %": int((err.abs() <= 0.01).sum()),
+                     "worst |error| vs torsion-free beam": err_rigid.abs().max()})
+    return pd.DataFrame(rows)
+
+
+def exceedances(df: pd.DataFrame, formula: str = "dual_length", segments: int = 20, tol: float = 0.01) -> pd.DataFrame:
+    """Trials where the chain misses the beam by more than ``tol``, with the
+    part of the gap the chain cannot close (it has no twist joint): the
+    beam's own stiffening when its torsion is made rigid."""
+    g = df[(df.formula == formula) & (df.segments == segments)].copy()
+    g["error"] = g.ratio - 1
+    g["beam torsion effect"] = g.k_beam_rigid_twist / g.k_beam - 1
+    g["error vs torsion-free beam"] = g.k_chain / g.k_beam_rigid_twist - 1
+    g = g[g.error.abs() > tol]
+    return g[["discretization", "trial", "error", "beam torsion effect", "error vs torsion-free beam"]]

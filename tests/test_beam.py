@@ -1,0 +1,62 @@
+"""The beam backend in the harness, and what it says about the chain."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from canebench.chain import build_chain
+from canebench.cli import main
+from canebench.config import ModelConfig
+from canebench.probe import run_probe
+from canebench.protocol import PROTOCOLS
+from canebench.registry import get_backend
+from canebench.rodstudy import chain_convergence, closed_form_ratio, straight_cantilever
+
+
+def test_beam_backend_is_registered_and_probed_like_the_others(bundled_trials):
+    t = bundled_trials[0]
+    chain = build_chain(t.cane, t.push_id)
+    tr = run_probe(get_backend("beam"), chain, PROTOCOLS["fast"], 12)
+    assert tr.status == "ok" and len(tr.force) == 12
+    assert np.allclose(tr.displacement, 0.5e-3 * np.arange(1, 13))
+    assert tr.settings["engine"].startswith("beam")
+    # gravity on: the sweep's slope and the gravity-free linear stiffness differ
+    # only by the geometric effect of self-weight (a few per cent here)
+    assert tr.fit().slope / tr.extras["k_linear"] == pytest.approx(1, abs=0.05)
+
+
+def test_beam_matches_the_tapered_closed_form_through_the_backend():
+    cane = straight_cantilever(True)
+    chain = build_chain(cane, "tip", ModelConfig(gravity=0.0))
+    k = run_probe(get_backend("beam"), chain, PROTOCOLS["fast"], 3).extras["k_linear"]
+    E, L, d0, d1 = 4.57e9, 1.2, 0.012, 0.006
+    assert 1 / k == pytest.approx(64 * L**3 / (3 * np.pi * E * d0**3 * d1), rel=1e-4)
+
+
+def test_chain_over_beam_follows_the_closed_forms_on_a_uniform_cantilever():
+    df = chain_convergence([("u", straight_cantilever(False), "tip")], segments=(3, 10, 20),
+                           discretizations=("uniform",))
+    for r in df.itertuples():
+        assert r.compliance_ratio == pytest.approx(closed_form_ratio(r.formula, r.segments), rel=1e-4)
+    paper40 = chain_convergence([("u", straight_cantilever(False), "tip")], segments=(40,), formulas=("paper",),
+                                discretizations=("uniform",)).ratio.iloc[0]
+    assert 1.9 < paper40 < 2.0  # K = 2EI/L: about twice the beam's stiffness
+
+
+@pytest.mark.parametrize("trial_id", ["b1c2t1", "b4c3t3", "b6c2t3"])
+def test_dual_length_chain_within_1pc_of_beam_at_20_uniform_segments(bundled_trials, trial_id):
+    t = next(t for t in bundled_trials if t.id == trial_id)
+    df = chain_convergence([(t.id, t.cane, t.push_id)], segments=(20,), formulas=("dual_length",),
+                           discretizations=("uniform",))
+    assert abs(df.ratio.iloc[0] - 1) < 0.01
+
+
+def test_converge_command_writes_study_and_report(tmp_path):
+    out = tmp_path / "conv"
+    assert main(["converge", "--trials", "b1c1t1,b2c2t2", "--segments", "5,10,20", "--out", str(out)]) == 0
+    df = pd.read_csv(out / "convergence.csv")
+    assert set(df.formula) == {"paper", "end_angle", "dual_length"}
+    assert set(df.trial) == {"uniform-cantilever", "tapered-cantilever", "b1c1t1", "b2c2t2"}
+    for f in ("chain_convergence.png", "rod_convergence.png", "convergence_summary.csv", "convergence.html"):
+        assert (out / f).exists(), f
+    assert "Chain against beam" in (out / "convergence.html").read_text()
