@@ -39,6 +39,7 @@ from exudyn.itemInterface import (
 )
 
 from canebench.chain import Chain
+from canebench.geometry import frame_with_x
 from canebench.protocol import Protocol
 
 from .base import DynamicBackend, Simulation
@@ -46,21 +47,12 @@ from .base import DynamicBackend, Simulation
 FAST_DT = 5e-3
 
 
-def probe_frame(u: np.ndarray) -> np.ndarray:
-    """Rotation whose rows map world vectors to a frame with x along ``u``."""
-    x = u / np.linalg.norm(u)
-    ref = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    y = np.cross(ref, x)
-    y /= np.linalg.norm(y)
-    return np.vstack([x, y, np.cross(x, y)])
-
-
 class ExudynSimulation(Simulation):
     def __init__(self, chain: Chain, proto: Protocol, native: bool) -> None:
         self.native_pid = native
         self.dt = FAST_DT if native else proto.dt
         self.gains = (proto.kp, proto.ki, proto.kd)
-        Rw = probe_frame(chain.direction)
+        Rw = frame_with_x(chain.direction).T  # world -> probe frame (x along the probe)
         self.SC = exu.SystemContainer()
         mbs = self.mbs = self.SC.AddSystem()
         n = chain.n_links

@@ -25,6 +25,7 @@ import mujoco
 import numpy as np
 
 from canebench.chain import Chain
+from canebench.geometry import frame_with_x
 from canebench.protocol import Protocol
 
 from .base import DynamicBackend, Simulation
@@ -38,14 +39,6 @@ def _quat(R: np.ndarray) -> np.ndarray:
 
 def _f(v: Any) -> str:
     return " ".join(repr(float(x)) for x in np.atleast_1d(v))
-
-
-def _frame_with_x(u: np.ndarray) -> np.ndarray:
-    x = u / np.linalg.norm(u)
-    ref = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    y = np.cross(ref, x)
-    y /= np.linalg.norm(y)
-    return np.column_stack([x, y, np.cross(x, y)])
 
 
 def chain_to_mjcf(chain: Chain, dt: float, integrator: str, native_pid: bool, gains: tuple[float, float, float]) -> str:
@@ -76,7 +69,7 @@ def chain_to_mjcf(chain: Chain, dt: float, integrator: str, native_pid: bool, ga
     else:
         act = '<motor name="probe" site="push" refsite="probe_ref" gear="1 0 0 0 0 0"/>'
     g = _f(chain.gravity)
-    ref_quat = _f(_quat(_frame_with_x(chain.direction)))
+    ref_quat = _f(_quat(frame_with_x(chain.direction)))
     return "\n".join([
         '<mujoco model="cane">',
         '  <compiler angle="radian" autolimits="true"/>',

@@ -84,6 +84,15 @@ class Curve:
         return None
 
 
+def frame_with_x(x: np.ndarray) -> np.ndarray:
+    """A right-handed rotation (columns x, y, z) whose x axis is along ``x``."""
+    x = np.asarray(x, float) / np.linalg.norm(x)
+    ref = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    y = np.cross(ref, x)
+    y /= np.linalg.norm(y)
+    return np.column_stack([x, y, np.cross(x, y)])
+
+
 def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distances from points ``p`` (m, 3) to every segment a[k]-b[k]; shape (m, k)."""
     ab = b - a  # (k, 3)

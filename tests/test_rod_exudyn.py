@@ -17,6 +17,7 @@ import pytest
 from canebench.backends.beam_backend import BeamStatic, rod_spec
 from canebench.chain import build_chain
 from canebench.config import ModelConfig
+from canebench.geometry import frame_with_x
 
 exu = pytest.importorskip("exudyn")
 from exudyn.itemInterface import (  # noqa: E402
@@ -29,14 +30,6 @@ from exudyn.itemInterface import (  # noqa: E402
     ObjectGround,
 )
 from scipy.spatial.transform import Rotation  # noqa: E402
-
-
-def _frame_x(t):
-    x = t / np.linalg.norm(t)
-    ref = np.array([0, 0, 1.0]) if abs(x[2]) < 0.9 else np.array([0, 1.0, 0])
-    y = np.cross(ref, x)
-    y /= np.linalg.norm(y)
-    return np.column_stack([x, y, np.cross(x, y)])
 
 
 def _ep(R):
@@ -58,7 +51,7 @@ def exudyn_beam_stiffness(chain, n_el=200, F=1e-2):
     T = spec.tangent(s)
     SC = exu.SystemContainer()
     mbs = SC.AddSystem()
-    nodes = [mbs.AddNode(NodeRigidBodyEP(referenceCoordinates=list(P[i]) + _ep(_frame_x(T[i])))) for i in range(len(s))]
+    nodes = [mbs.AddNode(NodeRigidBodyEP(referenceCoordinates=list(P[i]) + _ep(frame_with_x(T[i])))) for i in range(len(s))]
     nu = chain.rod.poisson_ratio
     for i in range(len(s) - 1):
         EI = spec.ei(np.array([0.5 * (s[i] + s[i + 1])]))[0]
@@ -71,7 +64,7 @@ def exudyn_beam_stiffness(chain, n_el=200, F=1e-2):
     ground = mbs.AddObject(ObjectGround(referencePosition=list(P[0])))
     mg = mbs.AddMarker(MarkerBodyRigid(bodyNumber=ground, localPosition=[0, 0, 0]))
     m0 = mbs.AddMarker(MarkerNodeRigid(nodeNumber=nodes[0]))
-    mbs.AddObject(GenericJoint(markerNumbers=[mg, m0], rotationMarker0=_frame_x(T[0])))
+    mbs.AddObject(GenericJoint(markerNumbers=[mg, m0], rotationMarker0=frame_with_x(T[0])))
     mbs.AddLoad(Force(markerNumber=mbs.AddMarker(MarkerNodeRigid(nodeNumber=nodes[n1])),
                       loadVector=list(F * chain.direction)))
     mbs.Assemble()
