@@ -30,7 +30,6 @@ REFERENCE = "pinocchio"
 TOL_REFERENCE = {"mujoco": 5e-3, "dart": 5e-3, "exudyn": 5e-3, "pybullet": 1e-2}
 TOL_REFERENCE_DEFAULT = 5e-3
 TOL_BASELINE = 1e-3
-BASELINE_DIR = Path(__file__).resolve().parent.parent / "reports" / "baselines"
 
 
 def baseline_path(protocol: str = "fast") -> Path:

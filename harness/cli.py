@@ -31,7 +31,7 @@ def cmd_run(a: argparse.Namespace) -> int:
     from .dataset import bundled_dataset, load_dataset
     from .protocol import get_protocol
     from .registry import select
-    from .run import default_jobs, provenance, run_trials, write_run
+    from .run import provenance, run_trials, write_run
 
     data_dir = Path(a.field) if a.field else bundled_dataset()
     trials = load_dataset(data_dir, a.trials)

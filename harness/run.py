@@ -15,7 +15,6 @@ import os
 import platform
 import subprocess
 import sys
-import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -199,6 +198,3 @@ def write_run(out_dir: Path, results: pd.DataFrame, traces: pd.DataFrame, fields
 def default_jobs() -> int:
     return max(1, min(2, os.cpu_count() or 1))
 
-
-def elapsed(t0: float) -> str:
-    return f"{time.perf_counter() - t0:.1f} s"
