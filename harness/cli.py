@@ -211,10 +211,14 @@ def cmd_backends(a: argparse.Namespace) -> int:
     for name, info in sorted(reg.items()):
         state = f"available, {info.kind}, version {info.version}" if info.available else f"UNAVAILABLE: {info.reason}"
         print(f"{name:12s} {state}  [{info.target}]  tags={','.join(info.tags)}")
-        if info.available and a.verbose:
+        if info.available:
             b = info.cls()
             for p in PROTOCOLS.values():
-                print(f"    {p.name}: {b.settings(p)}")
+                st = b.settings(p)
+                if a.verbose:
+                    print(f"    {p.name}: {st}")
+                else:
+                    print(f"    {p.name}: integrator={st.get('integrator')}; dt={st.get('dt')}; springs={st.get('springs')}")
     return 0
 
 
@@ -276,7 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
     cv.set_defaults(fn=cmd_converge)
 
     b = sub.add_parser("backends", help="list registered backends, versions, availability")
-    b.add_argument("-v", "--verbose", action="store_true", help="show each backend's configuration per protocol")
+    b.add_argument("-v", "--verbose", action="store_true", help="show each backend's full configuration per protocol")
     b.set_defaults(fn=cmd_backends)
 
     g = sub.add_parser("generate", help="regenerate the bundled synthetic dataset (seeded)")

@@ -88,6 +88,7 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
     window = max(1, int(round(proto.settle_window_s / dt)))
     use_native = proto.controller == "engine" and getattr(sim, "native_pid", False)
     tr.extras["controller"] = "engine" if use_native else "harness"
+    tr.extras["dt"] = dt  # the step this chain actually ran at (some backends choose it per chain)
     pid = PID(proto, dt)
     try:
         for k in range(1, n_steps + 1):

@@ -97,7 +97,7 @@ def probe_trial(trial: Trial, backends: list[str], proto: Protocol, config: Mode
             "wall_s": tr.wall_s, "n_samples": len(tr.force), "r2_sim": fit.r2 if fit else math.nan,
             "k_linear": tr.extras.get("k_linear", math.nan) * 1e-3, "n_links": chain.n_links,
             "chain_hash": chain.fingerprint(), "settings": json.dumps(tr.settings, sort_keys=True),
-            "controller": tr.extras.get("controller", ""),
+            "controller": tr.extras.get("controller", ""), "dt": tr.extras.get("dt", math.nan),
         })
         for i, (x, f) in enumerate(zip(tr.displacement, tr.force)):
             traces.append({"trial": trial.id, "backend": b, "step": i + 1, "displacement_mm": x * 1e3, "force_n": f})
