@@ -90,6 +90,8 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
     tr.extras["controller"] = "engine" if use_native else "harness"
     tr.extras["dt"] = dt  # the step this chain actually ran at (some backends choose it per chain)
     pid = PID(proto, dt)
+    # the tail of each step is watched in ten slices (native path)
+    chunks = [int(c) for c in np.diff(np.linspace(0, window, 11).round().astype(int)) if c]
     try:
         for k in range(1, n_steps + 1):
             sp = k * proto.step_m
@@ -97,11 +99,8 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
             if use_native:
                 sim.set_setpoint(sp)
                 sim.advance(per - window)
-                # watch the tail of the step in ten slices
-                chunks = np.diff(np.linspace(0, window, 11).round().astype(int))
                 for c in chunks:
-                    if c:
-                        sim.advance(int(c))
+                    sim.advance(c)
                     x, v = sim.read()
                     vmax = max(vmax, abs(v))
                 f = sim.force()

@@ -101,6 +101,27 @@ def traces_plot(traces: pd.DataFrame, res: pd.DataFrame, path: Path, n: int = 6)
     return path
 
 
+def _per_trial_lines(series: dict[str, pd.Series], trials: list[str], ylabel: str, path: Path,
+                     log: bool = False, unity: bool = False) -> Path:
+    """One line per backend over the trials (x axis: trial ids)."""
+    fig, ax = plt.subplots(figsize=(max(8, 0.2 * len(trials)), 4))
+    for name, values in series.items():
+        ax.plot(range(len(trials)), values, marker="o", ms=3, lw=0.8, label=name)
+    if unity:
+        ax.axhline(1, color="k", lw=0.6)
+    if log:
+        ax.set_yscale("log")
+    ax.set_xticks(range(len(trials)))
+    ax.set_xticklabels(trials, rotation=90, fontsize=7)
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
 def comparison_plots(res: pd.DataFrame, run_dir: Path) -> list[Path]:
     """Engine comparison: stiffness per engine and trial, the agreement matrix
     against Pinocchio as a heat map, and wall time per engine and trial."""
@@ -108,21 +129,8 @@ def comparison_plots(res: pd.DataFrame, run_dir: Path) -> list[Path]:
 
     trials = list(dict.fromkeys(res.trial))
     backends = sorted(res.backend.unique())
-    paths = []
-    fig, ax = plt.subplots(figsize=(max(8, 0.2 * len(trials)), 4))
-    for b in backends:
-        g = res[res.backend == b].set_index("trial").reindex(trials)
-        ax.plot(range(len(trials)), g.k_sim, marker="o", ms=3, lw=0.8, label=b)
-    ax.set_yscale("log")
-    ax.set_xticks(range(len(trials)))
-    ax.set_xticklabels(trials, rotation=90, fontsize=7)
-    ax.set_ylabel("k_sim (N/mm)")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    paths.append(run_dir / "engines_stiffness.png")
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
+    k_all = {b: res[res.backend == b].set_index("trial").reindex(trials).k_sim for b in backends}
+    paths = [_per_trial_lines(k_all, trials, "k_sim (N/mm)", run_dir / "engines_stiffness.png", log=True)]
 
     if REFERENCE in backends:
         tab = agreement_table(res)
@@ -168,18 +176,8 @@ def _beam_section(res: pd.DataFrame, run_dir: Path) -> str:
     k = res[res.status.isin(["ok", "unscored"])].pivot(index="trial", columns="backend", values="k_sim")
     trials = [t for t in dict.fromkeys(res.trial) if t in k.index]
     k = k.reindex(trials)
-    fig, ax = plt.subplots(figsize=(max(8, 0.2 * len(trials)), 4))
-    for b in [c for c in k.columns if c != "beam"]:
-        ax.plot(range(len(trials)), k[b] / k["beam"], marker="o", ms=3, lw=0.8, label=b)
-    ax.axhline(1, color="k", lw=0.6)
-    ax.set_xticks(range(len(trials)))
-    ax.set_xticklabels(trials, rotation=90, fontsize=7)
-    ax.set_ylabel("k_engine / k_beam")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(run_dir / "engines_vs_beam.png", dpi=100)
-    plt.close(fig)
+    _per_trial_lines({b: k[b] / k["beam"] for b in k.columns if b != "beam"}, trials, "k_engine / k_beam",
+                     run_dir / "engines_vs_beam.png", unity=True)
     ratio = (k.drop(columns="beam").div(k["beam"], axis=0)).describe().T[["mean", "min", "max"]]
     return ("<h2>Engines against the geometrically exact beam</h2><p>Each engine probes the chain; the beam is "
             "the continuous rod the chain approximates (same geometry, diameter line, modulus, protocol).</p>"
