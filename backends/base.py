@@ -2,7 +2,7 @@
 
 A backend only *builds, steps and reads*. The probe protocol (setpoints, PID
 law and gains, sampling, stop rules, divergence checks), the stiffness fit
-and scoring live in the harness (:mod:`canebench.probe`).
+and scoring live in the harness (:mod:`canebench.probe.driver`).
 
 Two kinds:
 
@@ -23,9 +23,9 @@ import importlib
 from abc import ABC, abstractmethod
 from typing import Any, Callable, ClassVar
 
-from canebench.chain import Chain
+from canebench.model.chain import Chain
 from canebench.errors import BackendUnavailable
-from canebench.protocol import Protocol
+from canebench.probe.protocol import Protocol
 
 
 class Backend(ABC):

@@ -1,4 +1,4 @@
-"""Beam backend: the geometrically exact Kirchhoff rod (:mod:`canebench.rod`)
+"""Beam backend: the geometrically exact Kirchhoff rod (:mod:`canebench.backends.rod`)
 of the cane the chain was cut from, probed by the same protocol.
 
 It takes the chain's continuum (``chain.rod``: the smoothed centreline, the
@@ -19,9 +19,9 @@ from typing import Any
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from canebench import rod as rodmod
-from canebench.chain import Chain
-from canebench.protocol import Protocol
+from canebench.backends import rod as rodmod
+from canebench.model.chain import Chain
+from canebench.probe.protocol import Protocol
 
 from .base import StaticBackend, StaticModel
 
@@ -74,11 +74,11 @@ class BeamBackend(StaticBackend):
     def engine_version(cls) -> str:
         from canebench import __version__
 
-        return f"canebench.rod {__version__}"
+        return f"canebench.backends.rod {__version__}"
 
     def settings(self, proto: Protocol) -> dict[str, Any]:
         return {
-            "engine": "beam (canebench.rod)",
+            "engine": "beam (canebench.backends.rod)",
             "version": self.engine_version(),
             "integrator": "shooting: RK4 on the Kirchhoff rod equations, Newton on m(0) and F",
             "dt": None,

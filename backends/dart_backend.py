@@ -24,9 +24,9 @@ from typing import Any
 import dartpy as dart
 import numpy as np
 
-from canebench.chain import Chain
-from canebench.protocol import Protocol
-from canebench.stability import choose_step, pid_limit, probe_effective_mass
+from canebench.model.chain import Chain
+from canebench.probe.protocol import Protocol
+from canebench.probe.stability import choose_step, pid_limit, probe_effective_mass
 
 from .base import DynamicBackend, Simulation
 

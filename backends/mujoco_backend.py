@@ -24,9 +24,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from canebench.chain import Chain
-from canebench.geometry import frame_with_x
-from canebench.protocol import Protocol
+from canebench.model.chain import Chain
+from canebench.model.geometry import frame_with_x
+from canebench.probe.protocol import Protocol
 
 from .base import DynamicBackend, Simulation
 

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from canebench.chain import Chain
-from canebench.protocol import Protocol
+from canebench.model.chain import Chain
+from canebench.probe.protocol import Protocol
 
 from .base import StaticBackend, StaticModel
 

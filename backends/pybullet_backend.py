@@ -34,9 +34,9 @@ import pybullet as p
 from pybullet_utils import bullet_client
 from scipy.spatial.transform import Rotation
 
-from canebench.chain import Chain
-from canebench.protocol import Protocol
-from canebench.stability import choose_step, explicit_limit
+from canebench.model.chain import Chain
+from canebench.probe.protocol import Protocol
+from canebench.probe.stability import choose_step, explicit_limit
 
 from .base import DynamicBackend, Simulation, StaticModel
 

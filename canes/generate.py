@@ -36,9 +36,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from canebench.chain import assemble_chain, probe_direction
-from canebench.config import GF_TO_N
-from canebench.geometry import Curve
+from canebench.model.chain import assemble_chain, probe_direction
+from canebench.units import GF_TO_N
+from canebench.model.geometry import Curve
 
 HERE = Path(__file__).resolve().parent
 DATASET = HERE / "synthetic"

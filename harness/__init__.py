@@ -6,7 +6,7 @@ The pipeline is one intermediate representation passed along a line::
     probe protocol (harness) ->  force/displacement samples  ->  stiffness  ->  score
 
 Only the harness reads YAML or field CSVs; backends only compile a
-:class:`canebench.chain.Chain`, step it and read it.
+:class:`canebench.model.chain.Chain`, step it and read it.
 """
 
 __version__ = "0.1.0"

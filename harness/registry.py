@@ -1,10 +1,16 @@
-"""Backend registry fed by Python entry points (group ``canebench.backends``).
+"""One tagged registry mechanism for everything selectable by name.
 
-Like asv's environment plugins: every installed distribution may add an
-engine by declaring an entry point; one that cannot import (engine missing,
-broken build) is listed as unavailable with the reason and skipped, and the
-run goes on with the others. Built-in backends register through the same
-group from canebench's own ``pyproject.toml``.
+Backends, stiffness formulas, probe protocols, model presets, physical
+effects and studies are each a :class:`Registry`: a name maps to an object,
+with tags and a one-line description (dm_control's ``TaggedTasks`` is the
+model). Registering a name twice is an error: a plugin must never silently
+replace a built-in.
+
+Backends are special only in where they come from: the entry-point group
+``canebench.backends`` of every installed distribution, canebench's own
+included (see ``pyproject.toml``). Like asv's environment plugins, a backend
+whose engine cannot be imported is kept in the registry as *unavailable* with
+its reason (a warning, not a crash), and runs skip it.
 """
 
 from __future__ import annotations
@@ -12,22 +18,104 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 from importlib import metadata
-from typing import Any
+from typing import Any, Callable, Generic, Iterator, TypeVar
 
-from .errors import BackendUnavailable, UnknownBackend
+from .errors import BackendUnavailable, CanebenchError, UnknownBackend
 
+T = TypeVar("T")
 ENTRY_POINT_GROUP = "canebench.backends"
 
-# Used only when canebench itself is not installed (no entry-point metadata),
-# e.g. when run from a source tree on PYTHONPATH.
-_BUILTIN = {
-    "mujoco": "canebench.backends.mujoco_backend:MujocoBackend",
-    "pinocchio": "canebench.backends.pinocchio_backend:PinocchioBackend",
-    "dart": "canebench.backends.dart_backend:DartBackend",
-    "exudyn": "canebench.backends.exudyn_backend:ExudynBackend",
-    "pybullet": "canebench.backends.pybullet_backend:PybulletBackend",
-    "beam": "canebench.backends.beam_backend:BeamBackend",
-}
+
+class DuplicateName(CanebenchError):
+    """A name registered twice in one registry."""
+
+
+class UnknownName(CanebenchError, KeyError):
+    """A name that is not in a registry."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else "unknown name"
+
+
+@dataclass(frozen=True)
+class Entry(Generic[T]):
+    name: str
+    obj: T
+    tags: tuple[str, ...] = ()
+    description: str = ""
+
+
+class Registry(Generic[T]):
+    """Named, tagged objects of one kind.
+
+    Parameters
+    ----------
+    kind : str
+        What the entries are ("stiffness formula", "protocol", ...), used in
+        error messages.
+    """
+
+    def __init__(self, kind: str) -> None:
+        self.kind = kind
+        self._entries: dict[str, Entry[T]] = {}
+
+    def add(self, name: str, obj: T, tags: tuple[str, ...] | list[str] = (), description: str = "") -> T:
+        if name in self._entries:
+            raise DuplicateName(f"{self.kind} {name!r} is already registered ({self._entries[name].obj!r})")
+        self._entries[name] = Entry(name, obj, tuple(tags), description)
+        return obj
+
+    def register(self, name: str, tags: tuple[str, ...] | list[str] = (),
+                 description: str = "") -> Callable[[T], T]:
+        """Decorator form of :meth:`add`."""
+
+        def deco(obj: T) -> T:
+            return self.add(name, obj, tags, description)
+
+        return deco
+
+    def remove(self, name: str) -> None:
+        """Drop an entry (tests and notebooks that register temporary ones)."""
+        self._entries.pop(name, None)
+
+    def entry(self, name: str) -> Entry[T]:
+        try:
+            return self._entries[name]
+        except KeyError:
+            raise UnknownName(f"unknown {self.kind} {name!r}; known: {', '.join(sorted(self._entries)) or 'none'}") \
+                from None
+
+    def __getitem__(self, name: str) -> T:
+        return self.entry(name).obj
+
+    def get(self, name: str, default: Any = None) -> Any:
+        e = self._entries.get(name)
+        return e.obj if e is not None else default
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._entries
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._entries)
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def names(self, *tags: str) -> list[str]:
+        """Names carrying every one of ``tags`` (all names when none given), sorted."""
+        return sorted(n for n, e in self._entries.items() if set(tags) <= set(e.tags))
+
+    def items(self) -> list[tuple[str, T]]:
+        return [(n, e.obj) for n, e in self._entries.items()]
+
+    def values(self) -> list[T]:
+        return [e.obj for e in self._entries.values()]
+
+    def description(self, name: str) -> str:
+        return self.entry(name).description
+
+
+# ---------------------------------------------------------------- backends
 
 
 @dataclass
@@ -40,20 +128,14 @@ class BackendInfo:
     version: str = ""
     tags: tuple[str, ...] = field(default_factory=tuple)
     kind: str = ""
+    from_entry_point: bool = True  # False: registered at run time (tests, notebooks)
 
 
-_REGISTRY: dict[str, BackendInfo] = {}
+BACKENDS: Registry[BackendInfo] = Registry("backend")
 _LOADED = False
 
 
-def _load_class(target: str) -> Any:
-    mod_name, _, attr = target.partition(":")
-    import importlib
-
-    return getattr(importlib.import_module(mod_name), attr)
-
-
-def _probe(info: BackendInfo, loader: Any) -> BackendInfo:
+def _probe(info: BackendInfo, loader: Callable[[], Any]) -> BackendInfo:
     try:
         cls = loader()
         cls.check_available()
@@ -68,31 +150,47 @@ def _probe(info: BackendInfo, loader: Any) -> BackendInfo:
 
 
 def register_backend(cls: Any, name: str | None = None) -> BackendInfo:
-    """Register a backend class directly (tests, notebooks)."""
+    """Register a backend class directly (tests, notebooks); the name must be new."""
+    discover()
     name = name or cls.name
-    info = _probe(BackendInfo(name, f"{cls.__module__}:{cls.__qualname__}"), lambda: cls)
-    _REGISTRY[name] = info
+    info = _probe(BackendInfo(name, f"{cls.__module__}:{cls.__qualname__}", from_entry_point=False), lambda: cls)
+    BACKENDS.add(name, info, info.tags, info.kind)
     return info
 
 
-def discover(refresh: bool = False) -> dict[str, BackendInfo]:
-    """All registered backends, available or not, by name."""
+def unregister_backend(name: str) -> None:
+    BACKENDS.remove(name)
+
+
+def discover(refresh: bool = False) -> Registry[BackendInfo]:
+    """All backends of the entry-point group, available or not, by name.
+
+    Two distributions declaring the same backend name with different targets
+    is a :class:`DuplicateName` error (the same target seen twice, as an
+    editable install can show it, is one backend).
+    """
     global _LOADED
     if _LOADED and not refresh:
-        return _REGISTRY
-    eps = list(metadata.entry_points(group=ENTRY_POINT_GROUP))
-    targets = {ep.name: (ep.value, ep.load) for ep in eps}
-    for name, target in _BUILTIN.items():
-        targets.setdefault(name, (target, lambda t=target: _load_class(t)))
-    for name, (target, loader) in sorted(targets.items()):
-        if name in _REGISTRY and not refresh:
+        return BACKENDS
+    seen: dict[str, Any] = {}
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name in seen and seen[ep.name].value != ep.value:
+            raise DuplicateName(f"backend {ep.name!r} is declared twice in entry-point group {ENTRY_POINT_GROUP!r}: "
+                                f"{seen[ep.name].value} and {ep.value}")
+        seen[ep.name] = ep
+    if not seen:
+        warnings.warn(f"no entry points in group {ENTRY_POINT_GROUP!r}: is canebench installed "
+                      "(pip install -e .)?", RuntimeWarning, stacklevel=2)
+    for name, ep in sorted(seen.items()):
+        if name in BACKENDS and not refresh:
             continue
-        info = _probe(BackendInfo(name, target), loader)
+        info = _probe(BackendInfo(name, ep.value), ep.load)
         if not info.available:
             warnings.warn(f"canebench backend {name!r} unavailable: {info.reason}", RuntimeWarning, stacklevel=2)
-        _REGISTRY[name] = info
+        BACKENDS.remove(name)
+        BACKENDS.add(name, info, info.tags, info.kind)
     _LOADED = True
-    return _REGISTRY
+    return BACKENDS
 
 
 def get_backend(name: str) -> Any:
@@ -104,6 +202,11 @@ def get_backend(name: str) -> Any:
     if not info.available:
         raise BackendUnavailable(f"backend {name!r} is unavailable: {info.reason}")
     return info.cls()
+
+
+def backend_version(name: str) -> str:
+    reg = discover()
+    return reg[name].version if name in reg else ""
 
 
 def select(names: list[str]) -> tuple[list[str], dict[str, str]]:

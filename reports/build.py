@@ -125,7 +125,7 @@ def _per_trial_lines(series: dict[str, pd.Series], trials: list[str], ylabel: st
 def comparison_plots(res: pd.DataFrame, run_dir: Path) -> list[Path]:
     """Engine comparison: stiffness per engine and trial, the agreement matrix
     against Pinocchio as a heat map, and wall time per engine and trial."""
-    from canebench.agreement import REFERENCE, agreement_table
+    from canebench.studies.agreement import REFERENCE, agreement_table
 
     trials = list(dict.fromkeys(res.trial))
     backends = sorted(res.backend.unique())
@@ -239,7 +239,7 @@ def build_report(run_dir: Path) -> Path:
     comparison = ""
     if res.backend.nunique() > 1:
         cmp_figs = comparison_plots(res, run_dir)
-        from canebench.agreement import REFERENCE, agreement_table, pairwise
+        from canebench.studies.agreement import REFERENCE, agreement_table, pairwise
 
         pairs = pairwise(res)
         tab = agreement_table(res) if REFERENCE in set(res.backend) else None

@@ -12,7 +12,7 @@ from matplotlib.ticker import NullFormatter, ScalarFormatter  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from canebench.rodstudy import closed_form_ratio  # noqa: E402
+from canebench.studies.convergence import closed_form_ratio  # noqa: E402
 
 COLORS = {"paper": "tab:red", "end_angle": "tab:blue", "dual_length": "tab:green"}
 

@@ -27,6 +27,6 @@ def field_dir() -> Path:
 
 @pytest.fixture(scope="session")
 def bundled_trials():
-    from canebench.dataset import bundled_dataset, load_dataset
+    from canebench.data.dataset import bundled_dataset, load_dataset
 
     return load_dataset(bundled_dataset())

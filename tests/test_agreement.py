@@ -8,13 +8,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from canebench.agreement import TOL_BASELINE, agreement_table, baseline_path, check, pairwise
+from canebench.studies.agreement import TOL_BASELINE, agreement_table, baseline_path, check, pairwise
 from canebench.backends.mujoco_backend import MujocoBackend
 from canebench.cli import main
-from canebench.config import ModelConfig
-from canebench.protocol import PROTOCOLS
+from canebench.model.config import ModelConfig
+from canebench.probe.protocol import PROTOCOLS
 from canebench.registry import register_backend
-from canebench.run import run_trials
+from canebench.execute.runner import run_trials
 
 SUBSET = "b1c1t1,b2c2t2,b4c3t3,b6c1t2"
 ENGINES = ["mujoco", "dart", "exudyn", "pybullet", "pinocchio"]
@@ -23,7 +23,7 @@ ENGINES = ["mujoco", "dart", "exudyn", "pybullet", "pinocchio"]
 @pytest.fixture(scope="module")
 def subset_results(bundled_trials):
     trials = [t for t in bundled_trials if t.id in SUBSET.split(",")]
-    res, _, _ = run_trials(trials, ENGINES, PROTOCOLS["fast"], ModelConfig(), jobs=2)
+    res = run_trials(trials, ENGINES, PROTOCOLS["fast"], ModelConfig(), jobs=2).results
     return res
 
 
@@ -64,7 +64,7 @@ class StiffMujoco(MujocoBackend):
 def test_a_broken_backend_fails_the_gate(bundled_trials, baseline):
     register_backend(StiffMujoco)
     trials = [t for t in bundled_trials if t.id in ("b1c1t1", "b2c2t2")]
-    res, _, _ = run_trials(trials, ["mujoco_stiff", "pinocchio"], PROTOCOLS["fast"], ModelConfig())
+    res = run_trials(trials, ["mujoco_stiff", "pinocchio"], PROTOCOLS["fast"], ModelConfig()).results
     res["backend"] = res.backend.replace({"mujoco_stiff": "mujoco"})  # it claims to be MuJoCo
     gate = check(agreement_table(res), baseline)
     assert not gate.ok

@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from canebench.chain import build_chain
-from canebench.config import ModelConfig
-from canebench.probe import run_probe
-from canebench.protocol import PROTOCOLS
+from canebench.model.chain import build_chain
+from canebench.model.config import ModelConfig
+from canebench.probe.driver import run_probe
+from canebench.probe.protocol import PROTOCOLS
 from canebench.registry import get_backend
-from canebench.run import run_trials
+from canebench.execute.runner import run_trials
 
 # Agreement tolerance of the issue: 0.5 % in stiffness. What separates a
 # dynamic run from the static sweep is the PID's lag (the dynamic samples
@@ -79,7 +79,7 @@ def test_mjcf_carries_the_chain(chain):
 
 
 def test_mujoco_fast_agrees_with_pinocchio_on_every_bundled_trial(bundled_trials):
-    res, _, _ = run_trials(bundled_trials, ["mujoco", "pinocchio"], PROTOCOLS["fast"], ModelConfig(), jobs=2)
+    res = run_trials(bundled_trials, ["mujoco", "pinocchio"], PROTOCOLS["fast"], ModelConfig(), jobs=2).results
     k = res.pivot(index="trial", columns="backend", values="k_sim")
     assert len(k) == 54 and k.notna().all().all()
     rel = (k.mujoco / k.pinocchio - 1).abs()
@@ -103,7 +103,7 @@ def test_mujoco_paper_protocol_agrees_short(bundled_trials, trial_id):
 
 @pytest.mark.slow
 def test_mujoco_paper_protocol_agrees_on_every_bundled_trial(bundled_trials):
-    res, _, _ = run_trials(bundled_trials, ["mujoco", "pinocchio"], PROTOCOLS["paper"], ModelConfig(), jobs=2)
+    res = run_trials(bundled_trials, ["mujoco", "pinocchio"], PROTOCOLS["paper"], ModelConfig(), jobs=2).results
     k = res.pivot(index="trial", columns="backend", values="k_sim")
     rel = (k.mujoco / k.pinocchio - 1).abs()
     assert rel.max() < AGREE, rel.sort_values().tail()

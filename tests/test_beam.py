@@ -4,13 +4,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from canebench.chain import build_chain
+from canebench.model.chain import build_chain
 from canebench.cli import main
-from canebench.config import ModelConfig
-from canebench.probe import run_probe
-from canebench.protocol import PROTOCOLS
+from canebench.model.config import ModelConfig
+from canebench.probe.driver import run_probe
+from canebench.probe.protocol import PROTOCOLS
 from canebench.registry import get_backend
-from canebench.rodstudy import chain_convergence, closed_form_ratio, straight_cantilever
+from canebench.studies.convergence import chain_convergence, closed_form_ratio, straight_cantilever
 
 
 def test_beam_backend_is_registered_and_probed_like_the_others(bundled_trials):

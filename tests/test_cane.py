@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import yaml
 
-from canebench.cane import cane_from_dict, load_cane
-from canebench.chain import build_chain
-from canebench.config import ModelConfig
+from canebench.data.cane import cane_from_dict, load_cane
+from canebench.model.chain import build_chain
+from canebench.model.config import ModelConfig
 from canebench.errors import InputError
 
 GOOD = {
@@ -67,7 +67,7 @@ def test_malformed_yaml_names_file_and_line(tmp_path: Path):
 
 
 def test_round_trip_through_yaml(tmp_path: Path):
-    from canebench.cane import cane_to_dict
+    from canebench.data.cane import cane_to_dict
 
     c = cane_from_dict(GOOD, "x")
     p = tmp_path / "c.yaml"

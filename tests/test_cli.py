@@ -47,7 +47,7 @@ def test_bad_inputs_exit_2_with_message(tmp_path: Path, capsys):
 def test_a_bad_cane_fails_its_trials_and_the_run_goes_on(tmp_path: Path):
     import shutil
 
-    from canebench.dataset import bundled_dataset
+    from canebench.data.dataset import bundled_dataset
 
     d = tmp_path / "data"
     shutil.copytree(bundled_dataset(), d)
@@ -65,7 +65,7 @@ def test_a_bad_cane_fails_its_trials_and_the_run_goes_on(tmp_path: Path):
 def test_malformed_yaml_stops_with_file_and_line(tmp_path: Path, capsys):
     import shutil
 
-    from canebench.dataset import bundled_dataset
+    from canebench.data.dataset import bundled_dataset
 
     d = tmp_path / "data"
     shutil.copytree(bundled_dataset(), d)

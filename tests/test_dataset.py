@@ -6,7 +6,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from canebench.dataset import load_dataset
+from canebench.data.dataset import load_dataset
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from canebench.diameter import fit_diameter
+from canebench.model.diameter import fit_diameter
 
 
 def test_exact_line_recovered():

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from canebench.chain import build_chain
-from canebench.probe import probe_dynamic, run_probe
-from canebench.protocol import PROTOCOLS
+from canebench.model.chain import build_chain
+from canebench.probe.driver import probe_dynamic, run_probe
+from canebench.probe.protocol import PROTOCOLS
 from canebench.registry import get_backend
 
 

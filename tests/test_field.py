@@ -9,7 +9,8 @@ import pandas as pd
 import pytest
 
 from canebench.errors import InputError
-from canebench.field import extract_field_stiffness, read_rig_csv
+from canebench.data.rig import read_rig_csv
+from canebench.measure.field import extract_field_stiffness
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -54,7 +55,7 @@ def test_synthetic_extraction_recovers_truth(bundled_trials):
     generator's truth: within 5 % of the truth's linear stiffness, where
     5 % covers load-cell noise on short trials and the truth's geometric
     and gravity nonlinearity over up to 44 mm of push."""
-    from canebench.run import field_fit_for
+    from canebench.execute.pipeline import field_fit_for
 
     truth = json.loads((REPO / "canes" / "synthetic-truth" / "truth.json").read_text())
     errs = []

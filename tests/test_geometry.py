@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from canebench.geometry import Curve, chain_deviation, chaikin, greedy_discretize
+from canebench.model.geometry import Curve, chain_deviation, chaikin, greedy_discretize
 
 
 def test_chaikin_one_iteration_by_hand():
@@ -61,12 +61,12 @@ def test_min_segments_respected_on_gentle_curve():
 
 
 def test_bundled_canes_within_5mm(bundled_trials):
-    from canebench.chain import build_chain
+    from canebench.model.chain import build_chain
 
     for t in bundled_trials[::3]:
         ch = build_chain(t.cane, t.push_id)
-        from canebench.chain import cane_curve
-        from canebench.config import ModelConfig
+        from canebench.model.chain import cane_curve
+        from canebench.model.config import ModelConfig
 
         curve = cane_curve(t.cane, ModelConfig())
         assert chain_deviation(curve, np.array(ch.meta["nodes_s"])).max() <= 0.005

@@ -1,14 +1,12 @@
 """The example plugin package, installed from scratch, registers itself
 through the entry point and runs a trial (no change to canebench)."""
 
-import os
 import subprocess
-import sys
-import venv
 from pathlib import Path
 
 import pandas as pd
 import pytest
+from venvtools import make_venv, pip_install
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -16,15 +14,11 @@ REPO = HERE.parent
 
 @pytest.fixture(scope="module")
 def plugin_env(tmp_path_factory):
-    d = tmp_path_factory.mktemp("plugin-venv")
-    # system site-packages give canebench and the engines; the plugin itself is
-    # installed the way a user would, by pip, into this environment only
-    venv.EnvBuilder(system_site_packages=True, with_pip=False).create(d)
-    py = d / "bin" / "python"
-    env = {**os.environ, "PIP_DISABLE_PIP_VERSION_CHECK": "1"}
-    r = subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "--no-deps", "-q",
-                        str(HERE / "plugin_example")],
-                       capture_output=True, text=True, env=env, timeout=300)
+    # the running environment gives canebench and the engines (works when
+    # that environment is itself a venv); the plugin is installed the way a
+    # user would, by pip, into the new environment only
+    py = make_venv(tmp_path_factory.mktemp("plugin-venv"))
+    r = pip_install(py, "--no-deps", str(HERE / "plugin_example"))
     assert r.returncode == 0, r.stderr
     return py
 

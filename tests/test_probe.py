@@ -6,9 +6,9 @@ import math
 import pytest
 
 from canebench.backends.base import DynamicBackend, Simulation, StaticBackend, StaticModel
-from canebench.chain import build_chain
-from canebench.probe import run_probe
-from canebench.protocol import PROTOCOLS
+from canebench.model.chain import build_chain
+from canebench.probe.driver import run_probe
+from canebench.probe.protocol import PROTOCOLS
 from canebench.registry import get_backend
 
 

@@ -6,7 +6,7 @@ error at 200 elements is below 1e-9 in all these cases, see the order test)."""
 import numpy as np
 import pytest
 
-from canebench.rod import Rod, RodSpec, _rotate
+from canebench.backends.rod import Rod, RodSpec, _rotate
 
 N_CONVERGED = 200
 
@@ -132,7 +132,7 @@ def test_bathe_bolourchi_45_degree_bend():
 def test_convergence_order_is_four():
     """RK4 shooting: error against elements on a tapered cantilever (closed
     form) falls as N^-4."""
-    from canebench.rodstudy import rod_convergence
+    from canebench.studies.convergence import rod_convergence
 
     df = rod_convergence([4, 8, 16, 32])
     slope = np.polyfit(np.log(df.elements), np.log(df.rel_error), 1)[0]

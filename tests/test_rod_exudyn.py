@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from canebench.backends.beam_backend import BeamStatic, rod_spec
-from canebench.chain import build_chain
-from canebench.config import ModelConfig
-from canebench.geometry import frame_with_x
+from canebench.model.chain import build_chain
+from canebench.model.config import ModelConfig
+from canebench.model.geometry import frame_with_x
 
 exu = pytest.importorskip("exudyn")
 from exudyn.itemInterface import (  # noqa: E402

@@ -4,11 +4,11 @@
 import numpy as np
 import pytest
 
-from canebench.cane import cane_from_dict
-from canebench.chain import build_chain
-from canebench.config import ModelConfig
+from canebench.data.cane import cane_from_dict
+from canebench.model.chain import build_chain
+from canebench.model.config import ModelConfig
 from canebench.errors import InputError
-from canebench.stiffness import joint_stiffness
+from canebench.model.stiffness import joint_stiffness
 
 E, D, L = 4.57e9, 0.01, 1.2
 EI = E * np.pi * D**4 / 64
@@ -76,7 +76,7 @@ def test_reference_table_values():
 
 
 def test_dual_length_with_context_integrates_compliance_exactly():
-    from canebench.stiffness import StiffnessContext
+    from canebench.model.stiffness import StiffnessContext
 
     # EI(s) = 1 + s on nodes 0, 1, 3: dual segments [0, 0.5] and [0.5, 2]
     ctx = StiffnessContext(np.array([0.0, 1.0, 3.0]), lambda s: 1.0 + s)

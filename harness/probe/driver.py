@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from .chain import Chain
-from .fit import LineFit, fit_line
+from ..model.chain import Chain
+from ..measure.fit import LineFit, fit_line
 from .protocol import PID, Protocol
 
 

@@ -13,6 +13,9 @@ from typing import Callable
 
 import numpy as np
 
+from ..errors import InputError
+from ..registry import Registry
+
 
 @dataclass(frozen=True)
 class StiffnessContext:
@@ -23,21 +26,16 @@ class StiffnessContext:
 
 
 Formula = Callable[[np.ndarray, np.ndarray, "StiffnessContext | None"], np.ndarray]
-FORMULAS: dict[str, Formula] = {}
-DESCRIPTIONS: dict[str, str] = {}
+FORMULAS: Registry[Formula] = Registry("stiffness formula")
 _XG, _WG = np.polynomial.legendre.leggauss(8)
 
 
-def register_formula(name: str, description: str) -> Callable[[Formula], Formula]:
-    def deco(fn: Formula) -> Formula:
-        FORMULAS[name] = fn
-        DESCRIPTIONS[name] = description
-        return fn
-
-    return deco
+def register_formula(name: str, description: str, tags: tuple[str, ...] = ()) -> Callable[[Formula], Formula]:
+    """Register a formula under ``name`` (a duplicate name is an error)."""
+    return FORMULAS.register(name, tags, description)
 
 
-@register_formula("paper", "K = 2EI/L of the following link (Kolano et al.; the default, for reproduction)")
+@register_formula("paper", "K = 2EI/L of the following link (Kolano et al.; the default, for reproduction)", ("paper",))
 def paper(ei: np.ndarray, length: np.ndarray, ctx: StiffnessContext | None = None) -> np.ndarray:
     # Paper Sec. III-C: tip deflection of a cantilever under an end moment,
     # v = ML^2/(2EI), equated with v = ML/K.
@@ -76,8 +74,6 @@ def dual_length(ei: np.ndarray, length: np.ndarray, ctx: StiffnessContext | None
 def joint_stiffness(name: str, ei: np.ndarray, length: np.ndarray, ctx: StiffnessContext | None = None,
                     source: str = "model configuration") -> np.ndarray:
     """Stiffness (N m/rad) of each joint by the named formula."""
-    from .errors import InputError
-
     if name not in FORMULAS:
         raise InputError(source, "stiffness_formula", f"unknown formula {name!r}; known: {', '.join(sorted(FORMULAS))}")
     return np.asarray(FORMULAS[name](np.asarray(ei, float), np.asarray(length, float), ctx), dtype=float)

@@ -18,7 +18,7 @@ from pathlib import Path
 import pandas as pd
 
 from .cane import CaneDescription, cane_from_dict, load_cane
-from .errors import InputError
+from ..errors import InputError
 
 STRAIGHT_ASSUMPTION = ("geometry assumed: straight vertical cane from the ground to the highest push point "
                        "(the field data has no polylines)")

@@ -1,4 +1,4 @@
-"""The field rig's CSV format and field stiffness extraction.
+"""Field stiffness extraction from a rig trial (reading: :mod:`canebench.data.rig`).
 
 Rig CSV columns (see ../shared/field-data/README.md): ``Iteration``,
 ``Time Stamp`` (16-bit ms counter that wraps), ``Load Cell Reading (gf)``
@@ -35,36 +35,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
-from .config import GF_TO_N
-from .errors import InputError
+from ..data.rig import RigTrial
+from ..units import GF_TO_N
 from .fit import fit_line
 
-COLUMNS = {
-    "iteration": "Iteration",
-    "time": "Time Stamp",
-    "force": "Load Cell Reading (gf)",
-    "disp": "Displacement (mm)",
-    "height": "Height (mm)",
-}
 FORCE_LIMIT_GF = 1000.0
 RIG_FIT_THRESHOLD_GF = 20.0
 MIN_CONTACT_SAMPLES = 5
 MIN_R2 = 0.8
 ONSET_SEARCH_GF = 150.0  # hinge fitted over the record until the reading rises this much
-
-
-@dataclass
-class RigTrial:
-    path: str
-    displacement_mm: np.ndarray  # relative to first sample
-    force_gf: np.ndarray  # raw reading
-    time_s: np.ndarray  # unwrapped, from 0
-    height_mm: float
 
 
 @dataclass
@@ -87,41 +69,6 @@ class FieldFit:
     def n_steps(self) -> int:
         """Protocol steps the simulation may run to cover the same push."""
         return self.n_contact
-
-
-def read_rig_csv(path: str | Path) -> RigTrial:
-    """Read and validate one rig CSV."""
-    path = Path(path)
-    src = str(path)
-    try:
-        df = pd.read_csv(path)
-    except FileNotFoundError:
-        raise InputError(src, "<file>", "file not found") from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise InputError(src, "<file>", f"malformed CSV: {exc}") from None
-    df.columns = [str(c).strip() for c in df.columns]
-    for key, col in COLUMNS.items():
-        if col not in df.columns:
-            raise InputError(src, col, f"missing column; found {list(df.columns)}")
-    if len(df) < 2:
-        raise InputError(src, "<rows>", "fewer than 2 samples")
-    out = {}
-    for key in ("time", "force", "disp", "height"):
-        col = COLUMNS[key]
-        vals = pd.to_numeric(df[col], errors="coerce").to_numpy(float)
-        bad = ~np.isfinite(vals)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise InputError(src, col, f"row {i + 2}: not a finite number ({df[col].iloc[i]!r})")
-        out[key] = vals
-    disp = out["disp"] - out["disp"][0]
-    if np.any(np.diff(disp) <= 0):
-        i = int(np.argmax(np.diff(disp) <= 0)) + 1
-        raise InputError(src, COLUMNS["disp"], f"row {i + 2}: displacement does not increase")
-    t = out["time"].copy()
-    jumps = np.diff(t)
-    t[1:] += 65536.0 * np.cumsum(jumps < -32768)  # 16-bit counter wrapped
-    return RigTrial(src, disp, out["force"], (t - t[0]) / 1000.0, float(np.median(out["height"])))
 
 
 def _hinge_onset(x: np.ndarray, y: np.ndarray) -> tuple[int, float]:

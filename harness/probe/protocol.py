@@ -17,8 +17,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
-from .config import GF_TO_N
-from .errors import InputError
+from ..units import GF_TO_N
+from ..errors import InputError
+from ..registry import Registry
 
 
 @dataclass(frozen=True)
@@ -73,16 +74,14 @@ class Protocol:
         return asdict(self)
 
 
-PROTOCOLS: dict[str, Protocol] = {
-    "paper": Protocol(
-        "paper", dt=25e-6, controller="harness",
-        description="the paper's reference: 40 kHz simulation and controller, PID evaluated by the harness",
-    ),
-    "fast": Protocol(
-        "fast", dt=1e-3, controller="engine",
-        description="same physics and gains, 1 ms steps with the engine's implicit PID where it has one",
-    ),
-}
+PROTOCOLS: Registry[Protocol] = Registry("protocol")
+for _p, _tags in ((Protocol("paper", dt=25e-6, controller="harness",
+                            description="the paper's reference: 40 kHz simulation and controller, PID evaluated "
+                                        "by the harness"), ("paper", "reference")),
+                  (Protocol("fast", dt=1e-3, controller="engine",
+                            description="same physics and gains, 1 ms steps with the engine's implicit PID where "
+                                        "it has one"), ("default",))):
+    PROTOCOLS.add(_p.name, _p, _tags, _p.description)
 
 
 def get_protocol(name: str) -> Protocol:

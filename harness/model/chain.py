@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from .cane import CaneDescription, Location
+from ..data.cane import CaneDescription, Location
 from .config import ModelConfig
 from .diameter import fit_diameter
-from .errors import InputError
+from ..errors import InputError
 from .geometry import Curve, chaikin, greedy_discretize, uniform_discretize
 from .stiffness import StiffnessContext, joint_stiffness
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .errors import InputError
+from ..errors import InputError
 
 DEFAULT_DENSITY = 580.0  # kg/m^3, paper (Zhang et al.)
 DEFAULT_DAMPING = 0.15  # N m s/rad, paper (Pivato et al.)

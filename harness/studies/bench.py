@@ -13,13 +13,13 @@ import math
 
 import pandas as pd
 
-from .chain import build_chain
-from .config import ModelConfig
-from .dataset import bundled_dataset, load_dataset
-from .probe import run_probe
-from .protocol import PROTOCOLS
-from .registry import get_backend
-from .run import field_fit_for
+from ..model.chain import build_chain
+from ..model.config import ModelConfig
+from ..data.dataset import bundled_dataset, load_dataset
+from ..probe.driver import run_probe
+from ..probe.protocol import PROTOCOLS
+from ..registry import get_backend
+from ..execute.pipeline import field_fit_for
 
 
 def bench_protocols(trials: str = "b1c1t1,b1c2t1,b3c1t2", backends: list[str] | None = None,

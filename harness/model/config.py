@@ -13,9 +13,8 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from .errors import InputError
+from ..errors import InputError
 
-GF_TO_N = 9.80665e-3  # one gram-force in newtons
 
 
 @dataclass(frozen=True)
@@ -50,7 +49,7 @@ class ModelConfig:
         (off in the paper; with it, the beam-consistent chain converges at
         second order at the probe instead of first).
     stiffness_formula : str
-        Name in :data:`canebench.stiffness.FORMULAS` (``paper`` = 2EI/L).
+        Name in :data:`canebench.model.stiffness.FORMULAS` (``paper`` = 2EI/L).
     probe_angle_deg : float
         Probe pitch from perpendicular to the cane (paper's Morris range +-30).
     gravity : float

@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .cane import CaneDescription, cane_from_dict
-from .chain import build_chain
-from .config import ModelConfig
-from .rod import Rod, RodSpec
+from ..data.cane import CaneDescription, cane_from_dict
+from ..model.chain import build_chain
+from ..model.config import ModelConfig
+from ..backends.rod import Rod, RodSpec
 
 SEGMENTS = (3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30, 40)
 FORMULAS = ("paper", "end_angle", "dual_length")

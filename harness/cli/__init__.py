@@ -1,0 +1,3 @@
+"""The ``canebench`` command line (one module per command)."""
+
+from .main import build_parser, main  # noqa: F401

@@ -1,0 +1,34 @@
+"""``canebench bench``: benchmarks that print ratios measured in one process."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    be = sub.add_parser("bench", help="benchmarks: protocols, beam sweep, engines' CPU time, job runner overhead")
+    be.add_argument("--trials", help="trial globs on the bundled dataset")
+    be.add_argument("--beam", action="store_true", help="time the beam backend's full 90-step sweep instead")
+    be.add_argument("--engines", action="store_true",
+                    help="CPU seconds per backend over the bundled trials, as ratios to MuJoCo")
+    be.add_argument("--runner", action="store_true",
+                    help="job runner overhead: N Pinocchio jobs on the serial, local and Dask executors")
+    be.add_argument("--n-jobs", type=int, default=1000, help="jobs for --runner (default 1000)")
+    be.add_argument("--backends", default="mujoco", help="comma-separated; MuJoCo is always included as the baseline")
+    be.add_argument("--steps", type=int, default=None, help="protocol steps per trial (default: full trial)")
+    be.set_defaults(fn=main)
+
+
+def main(a: argparse.Namespace) -> int:
+    from ..studies import bench
+
+    if a.beam:
+        bench.bench_beam(trials=a.trials or "b1c1t1,b3c1t2,b5c3t1,b6c2t3")
+    elif a.engines:
+        bench.bench_engines(trials=a.trials, backends=None if a.backends == "mujoco" else a.backends.split(","))
+    elif a.runner:
+        bench.bench_runner(n_jobs=a.n_jobs)
+    else:
+        bench.bench_protocols(trials=a.trials or "b1c1t1,b1c2t1,b3c1t2", backends=a.backends.split(","),
+                              steps=a.steps)
+    return 0

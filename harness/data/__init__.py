@@ -1,0 +1,1 @@
+"""Stage 1, inputs: cane descriptions (YAML), the rig CSV format, datasets that pair them."""

@@ -1,0 +1,77 @@
+"""The field rig's CSV format: reading and validation.
+
+Rig CSV columns (see ../shared/field-data/README.md): ``Iteration``,
+``Time Stamp`` (16-bit ms counter that wraps), ``Load Cell Reading (gf)``
+(compressive positive, with a tare offset), ``Displacement (mm)`` (absolute
+probe position, 0.5 mm per sample), ``Height (mm)``.
+
+Every column must be present and numeric; a NaN or a non-monotonic
+displacement is an error naming the file, row and column. Time stamps are
+unwrapped (add 65536 at each negative jump) only to report the trial's
+duration; physics uses displacement, which the stepper sets exactly.
+Displacement is made relative to the first sample: the rig logs an absolute
+carriage position whose origin means nothing for the cane.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..errors import InputError
+
+COLUMNS = {
+    "iteration": "Iteration",
+    "time": "Time Stamp",
+    "force": "Load Cell Reading (gf)",
+    "disp": "Displacement (mm)",
+    "height": "Height (mm)",
+}
+
+
+@dataclass
+class RigTrial:
+    path: str
+    displacement_mm: np.ndarray  # relative to first sample
+    force_gf: np.ndarray  # raw reading
+    time_s: np.ndarray  # unwrapped, from 0
+    height_mm: float
+
+
+
+def read_rig_csv(path: str | Path) -> RigTrial:
+    """Read and validate one rig CSV."""
+    path = Path(path)
+    src = str(path)
+    try:
+        df = pd.read_csv(path)
+    except FileNotFoundError:
+        raise InputError(src, "<file>", "file not found") from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise InputError(src, "<file>", f"malformed CSV: {exc}") from None
+    df.columns = [str(c).strip() for c in df.columns]
+    for key, col in COLUMNS.items():
+        if col not in df.columns:
+            raise InputError(src, col, f"missing column; found {list(df.columns)}")
+    if len(df) < 2:
+        raise InputError(src, "<rows>", "fewer than 2 samples")
+    out = {}
+    for key in ("time", "force", "disp", "height"):
+        col = COLUMNS[key]
+        vals = pd.to_numeric(df[col], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(vals)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(src, col, f"row {i + 2}: not a finite number ({df[col].iloc[i]!r})")
+        out[key] = vals
+    disp = out["disp"] - out["disp"][0]
+    if np.any(np.diff(disp) <= 0):
+        i = int(np.argmax(np.diff(disp) <= 0)) + 1
+        raise InputError(src, COLUMNS["disp"], f"row {i + 2}: displacement does not increase")
+    t = out["time"].copy()
+    jumps = np.diff(t)
+    t[1:] += 65536.0 * np.cumsum(jumps < -32768)  # 16-bit counter wrapped
+    return RigTrial(src, disp, out["force"], (t - t[0]) / 1000.0, float(np.median(out["height"])))

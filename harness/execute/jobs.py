@@ -1,0 +1,131 @@
+"""Jobs: one (trial, backend, protocol, complete model configuration) each.
+
+A job's key is a hash of everything its result depends on:
+
+* the cane description's physics (centreline, raw flag, calipers, push
+  points, material; not its file path or provenance notes) and the push point;
+* the backend name and its engine's version;
+* the protocol (every field) and the number of protocol steps (which the
+  field trial's duration sets);
+* the complete model configuration, including any physical effects and
+  their parameters added later (``ModelConfig.to_dict``);
+* canebench's version.
+
+The chain a job builds is a pure function of the cane, the push point, the
+configuration and canebench's code, so this key determines the chain's
+fingerprint (which every result row records as ``chain_hash``). The key is
+computed from those inputs rather than from a built chain so that computing
+it never runs model code in the parent: a pathological configuration
+(``segments=100000``) must hang inside a job, where the time limit applies,
+not while the job list is being made.
+
+Same key, same result. Labels (a study's sample index, factor values) ride
+along with a job into its row but are not part of the key: the same physics
+asked for by two studies is computed once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+from .. import __version__
+from ..data.cane import cane_to_dict
+from ..data.dataset import Trial
+from ..model.config import ModelConfig
+from ..probe.protocol import Protocol
+
+
+def _canonical(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_default)
+
+
+def _default(obj: Any) -> Any:
+    try:
+        import numpy as np
+
+        if isinstance(obj, np.ndarray):
+            return obj.tolist()
+        if isinstance(obj, np.generic):
+            return obj.item()
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(obj, (set, frozenset)):
+        return sorted(obj)
+    raise TypeError(f"not serialisable in a job key: {type(obj).__name__}")
+
+
+def cane_physics(trial: Trial) -> dict[str, Any]:
+    """The part of a cane description a simulation depends on."""
+    d = cane_to_dict(trial.cane)
+    d.pop("provenance", None)
+    return d
+
+
+def config_hash(config: ModelConfig) -> str:
+    """Short hash of a model configuration (labels rows of multi-configuration runs)."""
+    return hashlib.sha256(_canonical(config.to_dict()).encode()).hexdigest()[:12]
+
+
+@dataclass(frozen=True)
+class Job:
+    """One simulation to run.
+
+    Attributes
+    ----------
+    trial : Trial
+    backend : str
+    engine_version : str
+        Version of the backend's engine (part of the key: a new engine means new results).
+    protocol : Protocol
+    config : ModelConfig
+    n_steps : int
+        Protocol steps (the field trial's duration caps the paper's 90).
+    labels : dict
+        Study labels copied into the result row; not part of the key.
+    backend_cls : type, optional
+        The backend class itself, for backends registered at run time (not
+        through the entry point), which worker processes cannot discover.
+    """
+
+    trial: Trial
+    backend: str
+    engine_version: str
+    protocol: Protocol
+    config: ModelConfig
+    n_steps: int
+    labels: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+    backend_cls: Any = field(default=None, compare=False, hash=False)
+
+    @property
+    def key(self) -> str:
+        k = getattr(self, "_key", None)
+        if k is None:
+            payload = {
+                "cane": cane_physics(self.trial), "push": self.trial.push_id, "backend": self.backend,
+                "engine": self.engine_version, "protocol": self.protocol.to_dict(), "config": self.config.to_dict(),
+                "n_steps": int(self.n_steps), "canebench": __version__,
+            }
+            k = hashlib.sha256(_canonical(payload).encode()).hexdigest()[:24]
+            object.__setattr__(self, "_key", k)
+        return k
+
+
+@dataclass
+class JobResult:
+    """What one job produced: a row of simulation columns and the sampled trace."""
+
+    key: str
+    row: dict[str, Any]
+    displacement_m: list[float] = field(default_factory=list)
+    force_n: list[float] = field(default_factory=list)
+
+    def to_json(self) -> str:
+        return json.dumps({"row": self.row, "x": self.displacement_m, "f": self.force_n}, default=_default)
+
+    @classmethod
+    def from_json(cls, key: str, text: str) -> "JobResult":
+        d = json.loads(text)
+        return cls(key, d["row"], d["x"], d["f"])

@@ -1,0 +1,203 @@
+"""The pipeline's stages as plain functions: make jobs, run one, score results.
+
+* :func:`field_stage` reads and fits every field trial once, in the client
+  (workers never need the field CSVs: on a cluster the data stays where the
+  client is).
+* :func:`make_jobs` turns trials x backends x configurations into
+  :class:`Job` objects; every study builds its list with it.
+* :func:`run_job` is what a worker executes: chain, probe, slope. It never
+  raises for a failing engine or a bad chain: the row carries the failure
+  and its reason.
+* :func:`score` joins simulation rows with field stiffness, in one place:
+  ``log_ratio = ln(k_sim / k_field)``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Iterable
+
+import numpy as np
+import pandas as pd
+
+from ..data.dataset import Trial
+from ..data.rig import read_rig_csv
+from ..measure.field import FieldFit, extract_field_stiffness
+from ..model.chain import build_chain
+from ..model.config import ModelConfig
+from ..probe.driver import run_probe
+from ..probe.protocol import Protocol
+from ..registry import backend_version, discover, get_backend
+from .jobs import Job, JobResult, config_hash
+
+RESULT_COLUMNS = [
+    "trial", "cane", "push_point", "bush", "backend", "protocol", "k_sim", "k_field", "log_ratio", "status",
+    "reason", "wall_s", "n_steps", "n_samples", "r2_sim", "k_linear", "n_links", "height_mm", "diameter_mm",
+    "field_usable", "field_reason", "synthetic", "chain_hash", "config_hash", "job_key",
+]
+SIM_STATUSES = ("ok", "failed", "timeout")
+
+
+@dataclass
+class FieldResult:
+    """One trial's field stiffness (or why there is none)."""
+
+    trial: Trial
+    fit: FieldFit | None
+    reason: str
+
+    @property
+    def k(self) -> float:
+        return self.fit.k_n_per_mm if self.fit is not None else math.nan
+
+    def n_steps(self, proto: Protocol, max_steps: int | None = None) -> int:
+        n = proto.max_steps
+        if self.fit is not None and self.fit.n_steps > 0:
+            n = min(n, self.fit.n_steps)  # paper: 90 s or the field trial's duration
+        if max_steps is not None:
+            n = min(n, max_steps)
+        return n
+
+    def row(self) -> dict[str, Any]:
+        ff = self.fit
+        if ff is None:
+            return {"trial": self.trial.id, "usable": False, "reason": self.reason}
+        return {"trial": self.trial.id, "k_field": ff.k_n_per_mm, "r2": ff.r2, "rms_n": ff.rms_n,
+                "n_contact": ff.n_contact, "onset_mm": ff.onset_mm, "tare_gf": ff.tare_gf, "usable": ff.usable,
+                "reason": ff.reason, "flags": "; ".join(ff.flags)}
+
+    def trace_rows(self) -> list[dict[str, Any]]:
+        ff = self.fit
+        if ff is None or ff.displacement_mm is None:
+            return []
+        return [{"trial": self.trial.id, "backend": "field", "step": i + 1, "displacement_mm": float(x),
+                 "force_n": float(f)} for i, (x, f) in enumerate(zip(ff.displacement_mm, ff.force_n))]
+
+
+def field_fit_for(trial: Trial) -> FieldFit | None:
+    if trial.csv is None or not trial.csv.exists():
+        return None
+    return extract_field_stiffness(read_rig_csv(trial.csv))
+
+
+def field_stage(trials: Iterable[Trial]) -> dict[str, FieldResult]:
+    """Field stiffness of every trial, by trial id (a bad CSV is a reason, not a crash)."""
+    out: dict[str, FieldResult] = {}
+    for t in trials:
+        if t.id in out:
+            continue
+        try:
+            ff = field_fit_for(t)
+            reason = ff.reason if ff is not None else "no field trial"
+        except Exception as exc:  # bad field CSV: still simulate, but do not score
+            ff, reason = None, f"field data unreadable: {exc}"
+        out[t.id] = FieldResult(t, ff, reason)
+    return out
+
+
+def make_jobs(trials: list[Trial], backends: list[str], proto: Protocol,
+              configs: ModelConfig | list[ModelConfig], fields: dict[str, FieldResult] | None = None,
+              max_steps: int | None = None, labels: list[dict[str, Any]] | None = None) -> list[Job]:
+    """Jobs for every trial x backend, with one configuration for all trials or one per trial.
+
+    Parameters
+    ----------
+    configs : ModelConfig or list of ModelConfig
+        A single configuration, or one per trial (``len(configs) == len(trials)``);
+        trials may repeat, so a list of (trial, configuration) pairs is a job list.
+    labels : list of dict, optional
+        Per-trial labels copied into each row (a study's sample index...).
+    """
+    fields = fields if fields is not None else field_stage(trials)
+    if isinstance(configs, ModelConfig):
+        configs = [configs] * len(trials)
+    if len(configs) != len(trials):
+        raise ValueError(f"{len(configs)} configurations for {len(trials)} trials")
+    reg = discover()
+    versions = {b: backend_version(b) for b in backends}
+    classes = {b: (reg[b].cls if b in reg and not reg[b].from_entry_point else None) for b in backends}
+    jobs = []
+    for i, (t, cfg) in enumerate(zip(trials, configs)):
+        n = fields[t.id].n_steps(proto, max_steps)
+        lab = labels[i] if labels else {}
+        for b in backends:
+            jobs.append(Job(t, b, versions[b], proto, cfg, n, dict(lab), classes[b]))
+    return jobs
+
+
+def run_job(job: Job) -> JobResult:
+    """Build the chain, probe it on the job's backend, fit the slope.
+
+    Never raises for a failing engine or chain: the row says ``failed`` and why.
+    """
+    t, cfg = job.trial, job.config
+    row: dict[str, Any] = {"backend": job.backend, "k_sim": math.nan, "wall_s": 0.0, "n_samples": 0,
+                           "n_steps": job.n_steps}
+    t0 = time.perf_counter()
+    try:
+        chain = build_chain(t.cane, t.push_id, cfg)
+    except Exception as exc:
+        row.update(status="failed", reason=f"chain: {exc}", wall_s=time.perf_counter() - t0)
+        return JobResult(job.key, row)
+    backend = job.backend_cls() if job.backend_cls is not None else get_backend(job.backend)
+    tr = run_probe(backend, chain, job.protocol, job.n_steps)
+    fit = tr.fit() if tr.status == "ok" else None
+    status, reason = tr.status, tr.reason
+    if status == "ok" and fit is None:
+        status, reason = "failed", "too few samples to fit a slope"
+    k_sim = fit.slope_n_per_mm if fit is not None else math.nan
+    if status == "ok" and not (k_sim > 0):
+        # a cane pushed forward never pulls back: this is the simulation's fault, not the field's
+        status, reason = "failed", f"non-positive simulated stiffness ({k_sim:.3g} N/mm)"
+    row.update(
+        k_sim=k_sim, status=status, reason=reason, wall_s=tr.wall_s, n_samples=len(tr.force),
+        r2_sim=fit.r2 if fit else math.nan, k_linear=tr.extras.get("k_linear", math.nan) * 1e-3,
+        n_links=chain.n_links, chain_hash=chain.fingerprint(), settings=json.dumps(tr.settings, sort_keys=True),
+        controller=tr.extras.get("controller", ""), dt=tr.extras.get("dt", math.nan),
+    )
+    return JobResult(job.key, row, [float(x) for x in tr.displacement], [float(f) for f in tr.force])
+
+
+def failed_result(job: Job, status: str, reason: str, wall_s: float = 0.0) -> JobResult:
+    """The row of a job that did not return (timeout, worker crash)."""
+    return JobResult(job.key, {"backend": job.backend, "k_sim": math.nan, "status": status, "reason": reason,
+                               "wall_s": wall_s, "n_samples": 0, "n_steps": job.n_steps})
+
+
+def score(job: Job, result: JobResult, field: FieldResult) -> dict[str, Any]:
+    """One results row: the job's simulation columns, its trial, its field stiffness and the log ratio."""
+    t = job.trial
+    row = {
+        "trial": t.id, "cane": t.cane.id, "push_point": t.push_id, "bush": t.bush, "protocol": job.protocol.name,
+        "height_mm": t.height_mm, "diameter_mm": t.diameter_mm,
+        "field_usable": bool(field.fit is not None and field.fit.usable), "field_reason": field.reason,
+        "synthetic": bool(t.cane.provenance.get("synthetic", False)),
+        "config_hash": config_hash(job.config), "job_key": job.key,
+        **result.row, **job.labels,
+    }
+    k_field = field.k
+    row["k_field"] = k_field
+    row["log_ratio"] = math.nan
+    if row["status"] == "ok":
+        if k_field > 0:
+            row["log_ratio"] = math.log(row["k_sim"] / k_field)
+        else:
+            row["status"], row["reason"] = "unscored", f"no field stiffness: {field.reason}"
+    return row
+
+
+def results_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    res = pd.DataFrame(rows)
+    for c in RESULT_COLUMNS:
+        if c not in res.columns:
+            res[c] = np.nan
+    return res[RESULT_COLUMNS + [c for c in res.columns if c not in RESULT_COLUMNS]].reset_index(drop=True)
+
+
+def trace_rows(job: Job, result: JobResult) -> list[dict[str, Any]]:
+    lab = {"config_hash": config_hash(job.config)}
+    return [{"trial": job.trial.id, "backend": job.backend, **lab, "step": i + 1, "displacement_mm": x * 1e3,
+             "force_n": f} for i, (x, f) in enumerate(zip(result.displacement_m, result.force_n))]

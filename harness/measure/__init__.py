@@ -1,0 +1,1 @@
+"""Stage 4, measurement: line fits and field stiffness extraction."""

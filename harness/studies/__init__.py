@@ -1,0 +1,1 @@
+"""Studies built on the runner: engine agreement, convergence, benchmarks."""
