@@ -98,16 +98,14 @@ class PinocchioStatic(StaticModel):
         a, o = self._axes_origins()
         n = self.n_act
         r = p[None, :] - o  # (n, 3)
-        H = np.zeros((self.model.nv, self.model.nv))
         u = self.u
-        ai = a[:, None, :]
-        aj = a[None, :, :]
-        rj = np.broadcast_to(r[None, :, :], (n, n, 3))
-        term = np.cross(np.cross(ai, aj), rj) + np.cross(np.broadcast_to(aj, (n, n, 3)), np.cross(ai, rj))
-        h = term @ u
-        upper = np.triu(h)
-        Hn = upper + np.triu(h, 1).T
-        H[:n, :n] = Hn
+        # scalar triple products turn both terms into a_i . (something of j):
+        # u.((a_i x a_j) x r_j) = a_i . (a_j x (r_j x u)),  u.(a_j x (a_i x r_j)) = a_i . (r_j x (u x a_j)),
+        # so H = A W^T with O(n) cross products instead of O(n^2)
+        w = np.cross(a, np.cross(r, u)) + np.cross(r, np.cross(u[None, :], a))
+        h = a @ w.T
+        H = np.zeros((self.model.nv, self.model.nv))
+        H[:n, :n] = np.triu(h) + np.triu(h, 1).T
         return H
 
     def solve(self, displacement: float) -> float:
@@ -134,7 +132,12 @@ class PinocchioStatic(StaticModel):
         raise ConvergenceError(f"Newton did not converge at displacement {displacement * 1e3:.3g} mm")
 
     def linear_stiffness(self) -> float:
-        _, Ju, _, _ = self._eval(np.zeros(self.model.nv))
+        """1 / (u^T J K^-1 J^T u) at rest: the Jacobian only (no gravity terms, no derivatives)."""
+        m, d = self.model, self.data
+        q0 = np.zeros(m.nv)
+        pin.computeJointJacobians(m, d, q0)
+        pin.updateFramePlacements(m, d)
+        Ju = self.u @ pin.getFrameJacobian(m, d, self.fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
         return float(1.0 / (Ju @ (Ju / self.K)))
 
 

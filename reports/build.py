@@ -227,17 +227,50 @@ def summary_table(res: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _read_table(path: Path, required: bool = False) -> pd.DataFrame:
+    """A run folder's CSV; an empty or missing optional file is an empty table."""
+    from canebench.errors import InputError
+
+    if not path.exists():
+        if required:
+            raise InputError(str(path.parent), path.name, "missing: is this a canebench run folder?")
+        return pd.DataFrame()
+    try:
+        return pd.read_csv(path)
+    except pd.errors.EmptyDataError:
+        return pd.DataFrame()
+
+
+def _state_section(meta: dict) -> str:
+    """Say plainly when a run did not finish, and how to resume it."""
+    state = meta.get("state")
+    if state in (None, "complete"):
+        return ""
+    done, total = meta.get("jobs_done", "?"), meta.get("jobs_total", "?")
+    return ('<p style="background:#ffd;padding:8px;border:1px solid #cc8"><b>Incomplete run</b> '
+            f'({html.escape(str(state))}): {done} of {total} jobs have results, {meta.get("jobs_missing", "?")} '
+            f'are missing. Every table and figure below shows only the finished jobs. '
+            f'{html.escape(str(meta.get("resume", "")))}</p>')
+
+
 def build_report(run_dir: Path) -> Path:
     """Write figures and ``report.html`` into ``run_dir``; return the page path."""
     run_dir = Path(run_dir)
-    res = pd.read_csv(run_dir / "results.csv")
-    traces = pd.read_csv(run_dir / "traces.csv") if (run_dir / "traces.csv").exists() else pd.DataFrame()
+    res = _read_table(run_dir / "results.csv", required=True)
+    if "status" not in res.columns:  # written by an older or an aborted run: an empty table, not a crash
+        from canebench.execute.pipeline import RESULT_COLUMNS
+
+        res = pd.DataFrame(columns=RESULT_COLUMNS)
+    traces = _read_table(run_dir / "traces.csv")
     meta = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").exists() else {}
-    figs = [stiffness_plot(res, run_dir / "stiffness.png"), log_ratio_plot(res, run_dir / "log_ratio.png")]
-    if len(traces):
-        figs.append(traces_plot(traces, res, run_dir / "traces.png"))
+    scored = len(res) > 0 and bool((res.status == "ok").any())
+    if scored:
+        stiffness_plot(res, run_dir / "stiffness.png")
+        log_ratio_plot(res, run_dir / "log_ratio.png")
+    if len(traces) and len(res):
+        traces_plot(traces, res, run_dir / "traces.png")
     comparison = ""
-    if res.backend.nunique() > 1:
+    if len(res) and res.backend.nunique() > 1:
         cmp_figs = comparison_plots(res, run_dir)
         from canebench.studies.agreement import REFERENCE, agreement_table, pairwise
 
@@ -280,10 +313,12 @@ td,th{{border:1px solid #ccc;padding:2px 6px}} img{{max-width:100%}}</style></he
 <p>Dataset: <code>{html.escape(str(meta.get('dataset', '?')))}</code>; protocol <b>{html.escape(str(meta.get('protocol', {}).get('name', '?')))}</b>;
 engines {html.escape(json.dumps(meta.get('engines', {})))}; canebench {html.escape(str(meta.get('canebench', '?')))}
 (commit {html.escape(str(meta.get('git_commit')))}); created {html.escape(str(meta.get('created', '?')))}.</p>
+{_state_section(meta)}
 <h2>Assumptions</h2><ul>{assumptions or '<li>none recorded</li>'}</ul>
-<h2>Summary</h2>{summ.to_html(index=False, float_format=lambda v: f'{v:.4g}')}
-<h2>Stiffness per trial</h2><img src="stiffness.png"><h2>Log-ratio error</h2><img src="log_ratio.png">
-{'<h2>Force-displacement examples</h2><img src="traces.png">' if len(traces) else ''}
+<h2>Summary</h2>{summ.to_html(index=False, float_format=lambda v: f'{v:.4g}') if len(summ) else '<p>no results</p>'}
+{'<h2>Stiffness per trial</h2><img src="stiffness.png"><h2>Log-ratio error</h2><img src="log_ratio.png">' if scored
+ else '<p><b>No scored trial</b>: no figure of stiffness against the field.</p>'}
+{'<h2>Force-displacement examples</h2><img src="traces.png">' if len(traces) and len(res) else ''}
 {comparison}{beam_section}{convergence_section}
 <h2>Failed or unscored</h2>{failed.to_html(index=False) if len(failed) else '<p>none</p>'}
 <h2>Per trial</h2>{per_trial.to_html(index=False, float_format=lambda v: f'{v:.4g}')}

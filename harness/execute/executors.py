@@ -21,8 +21,10 @@ deterministic and a job carries everything it needs.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
+import sys
 import time
 from abc import ABC, abstractmethod
 from collections import deque
@@ -66,18 +68,43 @@ class SerialExecutor(Executor):
             yield job, execute(job, timeout_s)
 
 
+@contextlib.contextmanager
+def _no_phantom_main() -> Iterator[None]:
+    """Hide a ``__main__.__file__`` that is not a file (``python - <<EOF``, ``python -c``).
+
+    multiprocessing re-runs the parent's main file in each new worker; for
+    standard input that "file" does not exist and every worker would die at
+    start. Workers never need the caller's main module: jobs carry canebench
+    objects only.
+    """
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    phantom = path is not None and not os.path.isfile(path)
+    if phantom:
+        del main.__file__
+    try:
+        yield
+    finally:
+        if phantom:
+            main.__file__ = path
+
+
 class _Worker:
     def __init__(self, ctx: Any, lifeline: Any, timeout_s: float | None) -> None:
         self.conn, child = ctx.Pipe()
         self.proc = ctx.Process(target=worker_main, args=(child, lifeline, timeout_s), daemon=True)
-        self.proc.start()
+        with _no_phantom_main():
+            self.proc.start()
         child.close()
         self.job: Job | None = None
         self.started = 0.0
 
     def give(self, job: Job) -> None:
         self.job, self.started = job, time.monotonic()
-        self.conn.send(job)
+        try:
+            self.conn.send(job)
+        except OSError:
+            pass  # the worker died (at start?): wait() sees EOF and reports the job failed
 
     def kill(self) -> None:
         if self.proc.is_alive():
@@ -184,42 +211,50 @@ class DaskExecutor(Executor):
         if not jobs:
             return
         from dask.distributed import Client, LocalCluster
-        from dask.distributed import wait as dwait
 
         cluster = None
         if self.scheduler:
             client = Client(self.scheduler, set_as_default=False)
         else:
-            cluster = LocalCluster(n_workers=self.n, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=40)
+            with _no_phantom_main():
+                cluster = LocalCluster(n_workers=self.n, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=40)
             client = Client(cluster, set_as_default=False)
         hard = (timeout_s + grace(timeout_s)) if timeout_s and timeout_s > 0 else None
+        futs: dict[Any, Job] = {}
         try:
-            futs = {}
-            for i, job in enumerate(jobs):
-                f = client.submit(execute, job, timeout_s, key=f"canebench-{job.key}-{i}", pure=False)
+            keys = [f"canebench-{job.key}-{i}" for i, job in enumerate(jobs)]
+            for f, job in zip(client.map(execute, jobs, [timeout_s] * len(jobs), key=keys, pure=False), jobs):
                 futs[f] = job
             started: dict[Any, float] = {}
-            pending = set(futs)
+            pending = dict.fromkeys(futs)  # insertion-ordered set
             while pending:
-                done, pending = dwait(list(pending), timeout=0.5, return_when="FIRST_COMPLETED")
-                pending = set(pending)
-                for f in done:
+                # the futures' own states (no default client: several may coexist in one process)
+                batch = [f for f in pending if f.done()]
+                if not batch:
+                    time.sleep(0.02)
+                for f in batch:
+                    pending.pop(f)
+                # one round trip for the whole batch, not one per future
+                ok = [f for f in batch if f.status == "finished"]
+                results = dict(zip(ok, client.gather(ok))) if ok else {}
+                for f in batch:
                     job = futs[f]
-                    try:
-                        res = f.result()
-                    except Exception as exc:  # worker lost, unpicklable result...
+                    if f in results:
+                        res = results[f]
+                    else:  # worker lost, unpicklable result...
+                        exc = f.exception()
                         res = failed_result(job, "failed", f"dask: {type(exc).__name__}: {exc}")
                     yield job, res
-                if hard is not None and pending:
-                    # a job counts from when the scheduler reports it processing
+                if hard is not None and pending and not batch:
+                    # a job's clock starts when the scheduler reports it processing
                     now = time.monotonic()
                     processing = {k for keys in client.processing().values() for k in keys}
                     for f in list(pending):
                         if f.key in processing:
                             started.setdefault(f, now)
                             if now - started[f] > hard:
-                                pending.discard(f)
+                                pending.pop(f)
                                 f.cancel()
                                 yield futs[f], failed_result(futs[f], "timeout",
                                                              f"timeout: no answer {hard:g} s after start (abandoned)",

@@ -35,7 +35,7 @@ from .jobs import Job, JobResult, config_hash
 
 RESULT_COLUMNS = [
     "trial", "cane", "push_point", "bush", "backend", "protocol", "k_sim", "k_field", "log_ratio", "status",
-    "reason", "wall_s", "n_steps", "n_samples", "r2_sim", "k_linear", "n_links", "height_mm", "diameter_mm",
+    "reason", "wall_s", "cpu_s", "n_steps", "n_samples", "r2_sim", "k_linear", "n_links", "height_mm", "diameter_mm",
     "field_usable", "field_reason", "synthetic", "chain_hash", "config_hash", "job_key",
 ]
 SIM_STATUSES = ("ok", "failed", "timeout")
@@ -136,11 +136,12 @@ def run_job(job: Job) -> JobResult:
     t, cfg = job.trial, job.config
     row: dict[str, Any] = {"backend": job.backend, "k_sim": math.nan, "wall_s": 0.0, "n_samples": 0,
                            "n_steps": job.n_steps}
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         chain = build_chain(t.cane, t.push_id, cfg)
     except Exception as exc:
-        row.update(status="failed", reason=f"chain: {exc}", wall_s=time.perf_counter() - t0)
+        row.update(status="failed", reason=f"chain: {exc}", wall_s=time.perf_counter() - t0,
+                   cpu_s=time.process_time() - c0)
         return JobResult(job.key, row)
     backend = job.backend_cls() if job.backend_cls is not None else get_backend(job.backend)
     tr = run_probe(backend, chain, job.protocol, job.n_steps)
@@ -153,7 +154,8 @@ def run_job(job: Job) -> JobResult:
         # a cane pushed forward never pulls back: this is the simulation's fault, not the field's
         status, reason = "failed", f"non-positive simulated stiffness ({k_sim:.3g} N/mm)"
     row.update(
-        k_sim=k_sim, status=status, reason=reason, wall_s=tr.wall_s, n_samples=len(tr.force),
+        k_sim=k_sim, status=status, reason=reason, wall_s=tr.wall_s, cpu_s=time.process_time() - c0,
+        n_samples=len(tr.force),
         r2_sim=fit.r2 if fit else math.nan, k_linear=tr.extras.get("k_linear", math.nan) * 1e-3,
         n_links=chain.n_links, chain_hash=chain.fingerprint(), settings=json.dumps(tr.settings, sort_keys=True),
         controller=tr.extras.get("controller", ""), dt=tr.extras.get("dt", math.nan),

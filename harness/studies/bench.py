@@ -85,3 +85,73 @@ def bench_beam(trials: str = "b1c1t1,b3c1t2,b5c3t1,b6c2t3", config: ModelConfig 
     print(f"beam: slowest full 90-step sweep {df.beam_s.max():.2f} s; median {df['beam/pinocchio'].median():.1f}x "
           f"the Pinocchio chain sweep in this run")
     return df
+
+
+def bench_engines(trials: str | None = None, backends: list[str] | None = None,
+                  config: ModelConfig | None = None) -> pd.DataFrame:
+    """CPU seconds per backend over the bundled trials (fast protocol), as ratios to MuJoCo.
+
+    Runs every job through the serial executor of the job runner, in this
+    process, so the numbers are the engines' own cost (chain build, probe,
+    fit) without pool overhead; ``canebench run`` spreads the same work over
+    the cores.
+    """
+    from ..execute.executors import SerialExecutor
+    from ..execute.runner import run_trials
+    from ..registry import discover
+
+    reg = discover()
+    backends = backends or sorted(n for n, i in reg.items() if i.available and "example-plugin" not in i.tags)
+    if "mujoco" not in backends:
+        backends = ["mujoco", *backends]
+    tr = load_dataset(bundled_dataset(), trials)
+    out = run_trials(tr, backends, PROTOCOLS["fast"], config or ModelConfig(), executor=SerialExecutor())
+    res = out.results
+    tot = res.groupby("backend").agg(cpu_s=("cpu_s", "sum"), wall_s=("wall_s", "sum"), jobs=("trial", "size"),
+                                     failed=("status", lambda s: int((~s.isin(["ok", "unscored"])).sum())))
+    tot["cpu_vs_mujoco"] = tot.cpu_s / tot.loc["mujoco", "cpu_s"]
+    tot = tot.sort_values("cpu_s", ascending=False)
+    print(f"engine cost over {len(tr)} bundled trials, fast protocol, one process (serial executor):")
+    print(tot.to_string(float_format=lambda v: f"{v:.3g}"))
+    print(f"total CPU {tot.cpu_s.sum():.1f} s; on 2 cores the ideal wall time is {tot.cpu_s.sum() / 2:.1f} s")
+    return tot
+
+
+def bench_runner(n_jobs: int = 1000, workers: int = 2) -> pd.DataFrame:
+    """Job-runner overhead: ``n_jobs`` Pinocchio jobs on the serial, local and Dask executors.
+
+    The jobs are the bundled trials under distinct modulus values (so every
+    key is new: nothing is reused), 20 protocol steps each. Prints wall times
+    and the ratios local/serial and dask/local measured in this process.
+    """
+    import tempfile
+    import time
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..execute.executors import DaskExecutor, LocalExecutor, SerialExecutor
+    from ..execute.pipeline import field_stage, make_jobs
+    from ..execute.runner import run_jobs
+
+    base = load_dataset(bundled_dataset())
+    trials = [base[i % len(base)] for i in range(n_jobs)]
+    moduli = np.linspace(2.0e9, 8.0e9, n_jobs)
+    configs = [ModelConfig(modulus_pa=float(E)) for E in moduli]
+    fields = field_stage(base)
+    jobs = make_jobs(trials, ["pinocchio"], PROTOCOLS["fast"], configs, fields, max_steps=20)
+    rows = []
+    for name, ex in (("serial", SerialExecutor()), ("local", LocalExecutor(workers)),
+                     ("dask", DaskExecutor(workers=workers))):
+        with tempfile.TemporaryDirectory() as d:
+            t0 = time.perf_counter()
+            out = run_jobs(jobs, Path(d), ex, fields=fields, with_traces=False)
+            wall = time.perf_counter() - t0
+        rows.append({"executor": name, "jobs": len(jobs), "wall_s": wall, "ok": int((out.results.status == "ok").sum()),
+                     "job_cpu_s": out.results.cpu_s.sum()})
+    df = pd.DataFrame(rows).set_index("executor")
+    df["per_job_ms"] = 1e3 * df.wall_s / df.jobs
+    df["vs_local"] = df.wall_s / df.loc["local", "wall_s"]
+    print(f"job runner: {n_jobs} Pinocchio jobs (20 steps each), {workers} workers, store and exports included")
+    print(df.to_string(float_format=lambda v: f"{v:.3g}"))
+    return df
