@@ -327,3 +327,15 @@ engines {html.escape(json.dumps(meta.get('engines', {})))}; canebench {html.esca
     out = run_dir / "report.html"
     out.write_text(page)
     return out
+
+
+def convergence_page(run_dir: Path) -> Path:
+    """The convergence study's page: the full report in a run folder, else a page of its own."""
+    run_dir = Path(run_dir)
+    if (run_dir / "results.csv").exists():
+        return build_report(run_dir)
+    page = run_dir / "convergence.html"
+    page.write_text("<!doctype html><html><head><meta charset='utf-8'><title>canebench convergence</title>"
+                    "</head><body style='font-family:sans-serif;max-width:1200px;margin:auto'>"
+                    f"{_convergence_section(run_dir)}</body></html>")
+    return page

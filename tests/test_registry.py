@@ -38,3 +38,35 @@ def test_unavailable_backend_is_skipped_with_reason():
     assert usable == ["mujoco"] and "missing_engine" in skipped
     with pytest.raises(BackendUnavailable):
         get_backend("missing_engine")
+
+
+def test_tagged_registry_refuses_duplicates_and_selects_by_tag():
+    from canebench.registry import DuplicateName, Registry, UnknownName
+
+    r = Registry("thing")
+    r.add("a", 1, ("x", "y"), "first")
+    r.add("b", 2, ("x",))
+    with pytest.raises(DuplicateName, match="thing 'a'"):
+        r.add("a", 3)
+    assert r.names("x") == ["a", "b"] and r.names("x", "y") == ["a"] and r.names() == ["a", "b"]
+    assert r["a"] == 1 and r.description("a") == "first"
+    with pytest.raises(UnknownName, match="known: a, b"):
+        r["c"]
+
+
+def test_every_selectable_kind_is_a_registry():
+    from canebench.execute.executors import EXECUTORS
+    from canebench.model.presets import PRESETS
+    from canebench.model.stiffness import FORMULAS, register_formula
+    from canebench.probe.protocol import PROTOCOLS
+    from canebench.registry import BACKENDS, DuplicateName, Registry
+    from canebench.studies import STUDIES
+
+    for reg in (BACKENDS, FORMULAS, PROTOCOLS, PRESETS, EXECUTORS, STUDIES):
+        assert isinstance(reg, Registry) and len(reg) > 0
+    assert {"paper", "end_angle", "dual_length"} <= set(FORMULAS)
+    assert PRESETS["paper"].modulus_pa == 4.57e9 and PRESETS["paper"].stiffness_formula == "paper"
+    with pytest.raises(DuplicateName):  # a plugin cannot silently replace a built-in formula
+        register_formula("paper", "impostor")(lambda ei, length, ctx=None: ei)
+    assert FORMULAS.description("paper").startswith("K = 2EI/L")
+

@@ -174,3 +174,17 @@ def test_field_fits_run_once_in_the_client(two_trials):
     assert set(fields) == {t.id for t in two_trials}
     jobs = make_jobs(two_trials, ["pinocchio"], FAST, ModelConfig(), fields)
     assert [j.n_steps for j in jobs] == [fields[t.id].n_steps(FAST) for t in two_trials]
+
+
+def test_cooperative_time_limit_stops_a_job_in_a_thread(two_trials):
+    """A Dask worker runs jobs in threads, where no timer signal reaches: the loops check the deadline."""
+    import threading
+
+    from canebench.execute.worker import execute
+
+    job = make_jobs(two_trials[:1], ["pinocchio"], FAST, ModelConfig(segments=100000))[0]
+    box = {}
+    th = threading.Thread(target=lambda: box.setdefault("r", execute(job, 1.0)))
+    th.start()
+    th.join(30)
+    assert not th.is_alive() and box["r"].row["status"] == "timeout"

@@ -36,7 +36,7 @@ from .jobs import Job, JobResult
 from .pipeline import failed_result
 from .worker import execute, worker_main
 
-DEFAULT_TIMEOUT_S = 600.0  # generous: the slowest full trial (beam, paper protocol) takes about 20 s
+DEFAULT_TIMEOUT_S = 600.0  # generous: a full 40 kHz MuJoCo trial takes about 15 s
 
 
 def grace(timeout_s: float) -> float:

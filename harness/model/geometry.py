@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..limits import check_deadline
+
 QUERY_POINTS = 100  # paper: "100 uniform points on the curve were queried"
 STRAIGHT_TOL = 1e-6  # m; a curve this close to its chord is treated as straight
 
@@ -167,6 +169,7 @@ def greedy_discretize(
 
     nodes = sorted([0.0, L, *fixed])
     while True:
+        check_deadline()  # thousands of links take minutes: let a job's time limit stop it anywhere
         n_links = len(nodes) - 1
         if target is not None and n_links >= target:
             break

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ..limits import check_deadline
 from ..model.chain import Chain
 from ..measure.fit import LineFit, fit_line
 from .protocol import PID, Protocol
@@ -59,6 +60,7 @@ def probe_static(model: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
     t0 = time.perf_counter()
     try:
         for k in range(1, n_steps + 1):
+            check_deadline()
             sp = k * proto.step_m
             f = float(model.solve(sp))
             _check(proto, k, sp, 0.0, f, sp)
@@ -94,6 +96,7 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
     chunks = [int(c) for c in np.diff(np.linspace(0, window, 11).round().astype(int)) if c]
     try:
         for k in range(1, n_steps + 1):
+            check_deadline()
             sp = k * proto.step_m
             vmax = 0.0
             if use_native:

@@ -1,1 +1,26 @@
-"""Studies built on the runner: engine agreement, convergence, benchmarks."""
+"""Studies built on the runner: engine agreement, convergence, benchmarks.
+
+Each is a plain function returning a result object with ``.to_df()``; the
+:data:`STUDIES` registry names them for the command line and for plugins.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from ..registry import Registry
+
+STUDIES: Registry[Callable] = Registry("study")
+
+
+def _register_builtin() -> None:
+    from .agreement import run_agreement
+    from .convergence import converge
+
+    STUDIES.add("agreement", run_agreement, ("engines", "gate"),
+                "every trial on every chain engine against Pinocchio's exact statics; regression gate")
+    STUDIES.add("convergence", converge, ("beam", "discretization"),
+                "beam convergence and chain/beam stiffness against segment count, per formula")
+
+
+_register_builtin()

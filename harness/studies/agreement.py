@@ -98,3 +98,56 @@ def check(table: pd.DataFrame, baseline: pd.DataFrame | None) -> GateResult:
                          "tolerance": TOL_BASELINE, "detail": "not in the baseline"})
     cols = ["trial", "backend", "check", "value", "tolerance", "detail"]
     return GateResult(pd.DataFrame(rows, columns=cols))
+
+
+@dataclass
+class AgreementResult:
+    """What ``canebench agree`` measured: the matrix, the pairs, the gate and the run behind them."""
+
+    table: pd.DataFrame
+    pairs: pd.DataFrame
+    gate: GateResult | None
+    outcome: object  # RunOutcome
+    baseline_path: Path
+    baseline_found: bool
+
+    def to_df(self) -> pd.DataFrame:
+        return self.table
+
+    @property
+    def passed(self) -> bool:
+        return self.gate is not None and self.gate.ok
+
+
+def run_agreement(trials: list, backends: list[str], protocol: object, out: Path, executor: object = None,
+                  baseline: Path | None = None, update_baseline: bool = False, **run_kw: object) -> AgreementResult:
+    """Probe ``trials`` on ``backends`` (Pinocchio added as the reference) and check the gate.
+
+    Writes ``agreement.csv``, ``pairwise.csv`` and ``violations.csv`` into
+    ``out`` beside the run's own exports; with ``update_baseline`` writes the
+    baseline instead of checking it.
+    """
+    from ..execute.pipeline import field_stage, make_jobs
+    from ..execute.runner import run_jobs
+    from ..model.config import ModelConfig
+
+    if REFERENCE not in backends:
+        backends = [*backends, REFERENCE]
+    fields = field_stage(trials)
+    outcome = run_jobs(make_jobs(trials, backends, protocol, ModelConfig(), fields), out, executor, fields=fields,
+                       **run_kw)
+    bpath = Path(baseline) if baseline else baseline_path(protocol.name)
+    table = agreement_table(outcome.results) if len(outcome.results) else pd.DataFrame()
+    pairs = pairwise(outcome.results) if len(outcome.results) else pd.DataFrame()
+    if outcome.interrupted:
+        return AgreementResult(table, pairs, None, outcome, bpath, bpath.exists())
+    table.to_csv(out / "agreement.csv", index=False)
+    pairs.to_csv(out / "pairwise.csv", index=False)
+    if update_baseline:
+        bpath.parent.mkdir(parents=True, exist_ok=True)
+        table[["trial", "backend", "protocol", "k_sim", "status", "reason"]].to_csv(bpath, index=False)
+        return AgreementResult(table, pairs, None, outcome, bpath, True)
+    base = pd.read_csv(bpath) if bpath.exists() else None
+    gate = check(table, base)
+    gate.violations.to_csv(out / "violations.csv", index=False)
+    return AgreementResult(table, pairs, gate, outcome, bpath, base is not None)

@@ -8,6 +8,10 @@ F/d at a 1e-7 m push.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
 import numpy as np
 import pandas as pd
 
@@ -90,3 +94,40 @@ def chain_convergence(cases: list[tuple[str, CaneDescription, str]], segments=SE
         if progress:
             progress(i + 1, len(cases), tid)
     return pd.DataFrame(rows)
+
+
+@dataclass
+class ConvergenceResult:
+    """The convergence study's tables (``canebench converge``)."""
+
+    rod: pd.DataFrame  # beam tip-deflection error against RK4 elements
+    chains: pd.DataFrame  # chain/beam stiffness per case, formula, discretization, segment count
+    summary: pd.DataFrame
+    exceedances: pd.DataFrame
+    rod_order: float
+
+    def to_df(self) -> pd.DataFrame:
+        return self.chains
+
+
+def converge(out: Path, trials: str | None = None, segments: tuple[int, ...] = SEGMENTS,
+             progress: Callable[[int, int, str], None] | None = None) -> ConvergenceResult:
+    """Run the convergence study on the two straight cantilevers and the bundled canes; write CSVs and figures."""
+    from canebench.reports.convergence import chain_plot, exceedances, rod_plot, summary
+
+    from ..data.dataset import bundled_dataset, load_dataset
+
+    out.mkdir(parents=True, exist_ok=True)
+    rod = rod_convergence()
+    rod.to_csv(out / "rod_convergence.csv", index=False)
+    order = -float(np.polyfit(np.log(rod.elements[:-2]), np.log(rod.rel_error[:-2]), 1)[0])
+    cases = [("uniform-cantilever", straight_cantilever(False), "tip"),
+             ("tapered-cantilever", straight_cantilever(True), "tip")]
+    cases += [(t.id, t.cane, t.push_id) for t in load_dataset(bundled_dataset(), trials)]
+    df = chain_convergence(cases, segments=segments, progress=progress)
+    df.to_csv(out / "convergence.csv", index=False)
+    chain_plot(df, out / "chain_convergence.png")
+    rod_plot(rod, out / "rod_convergence.png")
+    summ = summary(df)
+    summ.to_csv(out / "convergence_summary.csv", index=False)
+    return ConvergenceResult(rod, df, summ, exceedances(df), order)
