@@ -66,6 +66,14 @@ class Backend(ABC):
         """How the engine is configured for ``protocol`` (integrator, dt, where
         springs/damping/PID are integrated, why). Recorded in every result."""
 
+    def answer(self, protocol: Protocol) -> str:
+        """What kind of answer this backend gives under ``protocol``: ``dynamic``
+        (the engine integrates the push in time), ``static`` (exact
+        equilibrium) or ``quasi-static`` (a dynamic engine answering with a
+        static solve on its own kinematics, making no time step). Recorded in
+        every result so no reader mistakes one for another."""
+        return self.kind
+
 
 class Simulation(ABC):
     """One compiled chain in a dynamic engine."""

@@ -272,6 +272,10 @@ class PybulletBackend(DynamicBackend):
                     else "true dynamics below the explicit stability limit; never run at 25 us blindly"),
         }
 
+    def answer(self, proto: Protocol) -> str:
+        # fast: no Bullet time step is taken; Newton on Bullet's inverse dynamics and Jacobian
+        return "quasi-static" if proto.controller == "engine" else "dynamic"
+
     def build(self, chain: Chain, proto: Protocol) -> Any:
         if proto.controller == "engine":
             return PybulletQuasiStatic(chain)

@@ -98,7 +98,8 @@ def generate(out: Path | None = None, seed: int = 20240515) -> Path:
     from canebench.backends.pinocchio_backend import PinocchioStatic
 
     out = Path(out) if out else DATASET
-    truth_path = TRUTH if out == DATASET else out.parent / (out.name + "-truth") / "truth.json"
+    # with --out, everything (the truth included) stays inside DIR
+    truth_path = TRUTH if out == DATASET else out / "truth" / "truth.json"
     (out / "canes").mkdir(parents=True, exist_ok=True)
     (out / "trials").mkdir(parents=True, exist_ok=True)
     truth_path.parent.mkdir(parents=True, exist_ok=True)

@@ -36,3 +36,22 @@ class UnknownBackend(CanebenchError, KeyError):
 
     def __str__(self) -> str:  # KeyError quotes its message; keep it readable
         return str(self.args[0]) if self.args else "unknown backend"
+
+
+class InputWarning(UserWarning):
+    """Input that is possible but implausible (units, orientation, shape).
+
+    The message names the file, the field, the value and the likely cause;
+    ``--strict`` turns every such warning into an :class:`InputError`.
+    """
+
+    def __init__(self, source: str, field: str, message: str) -> None:
+        self.source, self.field, self.message = str(source), field, message
+        super().__init__(f"{self.source}: field '{field}': {message}")
+
+
+def warn_input(source: str, field: str, message: str) -> None:
+    """Emit an :class:`InputWarning` (an error under ``--strict``)."""
+    import warnings
+
+    warnings.warn(InputWarning(source, field, message), stacklevel=3)

@@ -27,6 +27,21 @@ def _height_class(df: pd.DataFrame) -> pd.Series:
     return rank.map({1.0: 30.0, 2.0: 60.0, 3.0: 110.0}).fillna(60.0)
 
 
+def _save(fig, path: Path, res: pd.DataFrame | None, dpi: int = 100) -> None:
+    """Save a figure with the run's assumptions stamped under it (a figure travels without its page)."""
+    notes: list[str] = []
+    if res is not None and "assumptions" in res.columns:
+        for a in res["assumptions"].dropna().unique():
+            notes += [x.strip() for x in str(a).split(";") if x.strip()]
+    notes = list(dict.fromkeys(notes))
+    if notes:
+        fig.subplots_adjust(bottom=min(0.35, fig.subplotpars.bottom + 0.045 * len(notes)))
+        fig.text(0.01, 0.005, "\n".join(f"assumption: {n}" for n in notes), fontsize=7, va="bottom", ha="left",
+                 color="#a33")
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def stiffness_plot(res: pd.DataFrame, path: Path) -> Path:
     """Paper Fig. 'doubleplot': simulated vs field stiffness per trial, log axes, 1:1 line."""
     backends = sorted(res.backend.unique())
@@ -53,8 +68,7 @@ def stiffness_plot(res: pd.DataFrame, path: Path) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, res, dpi=110)
     return path
 
 
@@ -76,8 +90,7 @@ def log_ratio_plot(res: pd.DataFrame, path: Path) -> Path:
     ax.legend(fontsize=8)
     ax.grid(True, axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, res, dpi=110)
     return path
 
 
@@ -96,13 +109,12 @@ def traces_plot(traces: pd.DataFrame, res: pd.DataFrame, path: Path, n: int = 6)
     if axes[0][0].get_legend_handles_labels()[0]:
         axes[0][0].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    _save(fig, path, res, dpi=100)
     return path
 
 
 def _per_trial_lines(series: dict[str, pd.Series], trials: list[str], ylabel: str, path: Path,
-                     log: bool = False, unity: bool = False) -> Path:
+                     log: bool = False, unity: bool = False, res: pd.DataFrame | None = None) -> Path:
     """One line per backend over the trials (x axis: trial ids)."""
     fig, ax = plt.subplots(figsize=(max(8, 0.2 * len(trials)), 4))
     for name, values in series.items():
@@ -117,8 +129,7 @@ def _per_trial_lines(series: dict[str, pd.Series], trials: list[str], ylabel: st
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    _save(fig, path, res, dpi=100)
     return path
 
 
@@ -130,7 +141,8 @@ def comparison_plots(res: pd.DataFrame, run_dir: Path) -> list[Path]:
     trials = list(dict.fromkeys(res.trial))
     backends = sorted(res.backend.unique())
     k_all = {b: res[res.backend == b].set_index("trial").reindex(trials).k_sim for b in backends}
-    paths = [_per_trial_lines(k_all, trials, "k_sim (N/mm)", run_dir / "engines_stiffness.png", log=True)]
+    paths = [_per_trial_lines(k_all, trials, "k_sim (N/mm)", run_dir / "engines_stiffness.png", log=True,
+                              res=res)]
 
     if REFERENCE in backends:
         tab = agreement_table(res)
@@ -151,8 +163,7 @@ def comparison_plots(res: pd.DataFrame, run_dir: Path) -> list[Path]:
         fig.colorbar(im, ax=ax, label=f"log10 |k / k_{REFERENCE} - 1|   (x = failed)")
         fig.tight_layout()
         paths.append(run_dir / "agreement_heatmap.png")
-        fig.savefig(paths[-1], dpi=100)
-        plt.close(fig)
+        _save(fig, paths[-1], res, dpi=100)
 
     fig, ax = plt.subplots(figsize=(7, 4))
     data = [res[res.backend == b].wall_s.to_numpy() for b in backends]
@@ -164,8 +175,7 @@ def comparison_plots(res: pd.DataFrame, run_dir: Path) -> list[Path]:
     ax.grid(alpha=0.3)
     fig.tight_layout()
     paths.append(run_dir / "wall_time.png")
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
+    _save(fig, paths[-1], res, dpi=100)
     return paths
 
 
@@ -281,7 +291,17 @@ def build_report(run_dir: Path) -> Path:
             ok = tab[tab.status.isin(["ok", "unscored"])]
             agg = ok.groupby("backend").rel_to_ref.agg(lambda v: v.abs().max()).rename("max |k/k_ref - 1|")
             fails = tab.groupby("backend").status.agg(lambda v: int((~v.isin(["ok", "unscored"])).sum()))
-            per_backend = pd.concat([agg, fails.rename("failed")], axis=1).to_html(float_format=lambda v: f"{v:.2e}")
+            parts = [agg, fails.rename("failed")]
+            if "answer" in tab.columns:
+                parts.insert(0, tab.groupby("backend").answer.agg(lambda v: ", ".join(sorted(set(map(str, v))))))
+            per_backend = pd.concat(parts, axis=1).to_html(float_format=lambda v: f"{v:.2e}")
+            if "answer" in tab.columns and (tab.answer == "quasi-static").any():
+                qs = ", ".join(sorted(set(tab[tab.answer == "quasi-static"].backend)))
+                per_backend += (f"<p><b>{html.escape(qs)}: quasi-static.</b> No engine time step is taken: each "
+                                "protocol step is a Newton solve on the engine's own kinematics, Jacobian and "
+                                "inverse dynamics. Its agreement tests the chain's compilation into the engine "
+                                "(frames, joint axes, masses, gravity) and those routines, not the engine's "
+                                "integrator or its joint springs in time.</p>")
         settings = meta.get("backend_settings", {})
         config_rows = "".join(
             f"<tr><td>{html.escape(b)}</td><td>{html.escape(str(st.get('integrator')))}</td>"

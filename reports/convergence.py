@@ -102,3 +102,16 @@ def exceedances(df: pd.DataFrame, formula: str = "dual_length", segments: int = 
     g["error vs torsion-free beam"] = g.k_chain / g.k_beam_rigid_twist - 1
     g = g[g.error.abs() > tol]
     return g[["discretization", "trial", "error", "beam torsion effect", "error vs torsion-free beam"]]
+
+
+def beam_mesh_summary(df: pd.DataFrame) -> str:
+    """One line on the beam's own mesh convergence (``beam_mesh.csv``)."""
+    if df is None or not len(df):
+        return "beam mesh: no push points"
+    worst = df.loc[df.rel_error.idxmax()]
+    worst_c = df.loc[df.rel_error_continuum.idxmax()]
+    return (f"beam mesh: {int(df['pass'].sum())}/{len(df)} push points within 1e-4 of the same beam at twice "
+            f"its mesh (worst {worst.rel_error:.1e} on {worst.trial} at {int(worst.elements)} elements; "
+            f"elements {int(df.elements.min())}-{int(df.elements.max())}); worst against the independent "
+            f"small-deflection continuum solution {worst_c.rel_error_continuum:.1e} ({worst_c.trial}); "
+            f"rest probe point off the centreline by at most {df.rest_offset_m.max():.1e} m")

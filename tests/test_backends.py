@@ -131,3 +131,20 @@ def test_pinocchio_hessian_matches_finite_differences(bundled_trials):
                      / (4 * eps * eps) for j in range(n)] for i in range(n)])
     # central differences are O(eps^2) = 1e-8 accurate relative to second derivatives of order 0.1
     assert np.abs(H - Hfd).max() < 1e-6 * max(1.0, np.abs(Hfd).max()) + 1e-7
+
+
+def test_rest_jacobian_equals_pinocchio_frame_jacobian(bundled_trials):
+    """linear_stiffness reads the rest Jacobian from the chain; Pinocchio's own must agree."""
+    import pinocchio as pin
+
+    from canebench.backends.pinocchio_backend import PinocchioStatic, rest_probe_jacobian
+
+    for tid in ("b1c1t1", "b2c2t3", "b6c3t2"):
+        t = next(t for t in bundled_trials if t.id == tid)
+        ch = build_chain(t.cane, t.push_id, ModelConfig(segments=9))
+        m = PinocchioStatic(ch)
+        q0 = np.zeros(m.model.nv)
+        pin.computeJointJacobians(m.model, m.data, q0)
+        pin.updateFramePlacements(m.model, m.data)
+        J = m.u @ pin.getFrameJacobian(m.model, m.data, m.fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
+        np.testing.assert_allclose(rest_probe_jacobian(ch), J, atol=1e-12)

@@ -50,12 +50,11 @@ def test_invalid_descriptions_name_the_field(mutate, field):
     assert "my_cane.yaml" in str(e.value)
 
 
-def test_push_point_above_cane_is_reported_at_chain_build():
+def test_push_point_above_cane_is_an_error_at_load():
     d = copy.deepcopy(GOOD)
     d["push_points"][0]["height"] = 3.0
-    cane = cane_from_dict(d, "c.yaml")
-    with pytest.raises(InputError, match=r"push_points\[0\]\.height"):
-        build_chain(cane, "1")
+    with pytest.raises(InputError, match=r"c.yaml: field 'push_points\[0\]\.height'"):
+        cane_from_dict(d, "c.yaml")
 
 
 def test_malformed_yaml_names_file_and_line(tmp_path: Path):

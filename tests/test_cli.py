@@ -44,7 +44,7 @@ def test_bad_inputs_exit_2_with_message(tmp_path: Path, capsys):
     assert main(["run", "--trials", "zzz*", "--out", str(tmp_path / "w")]) == 2
 
 
-def test_a_bad_cane_fails_its_trials_and_the_run_goes_on(tmp_path: Path):
+def test_a_bad_cane_is_refused_before_any_simulation(tmp_path: Path, capsys):
     import shutil
 
     from canebench.data.dataset import bundled_dataset
@@ -54,12 +54,10 @@ def test_a_bad_cane_fails_its_trials_and_the_run_goes_on(tmp_path: Path):
     y = d / "canes" / "b1c1.yaml"
     y.write_text(y.read_text().replace("- height:", "- height: 9.0\n  bogus:", 1))
     out = tmp_path / "run"
-    assert main(["run", "--field", str(d), "--out", str(out), "--trials", "b1c*", "--no-report"]) == 0
-    res = pd.read_csv(out / "results.csv")
-    bad = res[res.cane == "b1c1"]
-    assert len(bad) == 6 and (bad.status == "failed").all()
-    assert bad.reason.str.contains(r"b1c1.yaml: field 'calipers\[0\].height'").all()
-    assert (res[res.cane != "b1c1"].status == "ok").all()
+    assert main(["run", "--field", str(d), "--out", str(out), "--trials", "b1c*", "--no-report"]) == 2
+    err = capsys.readouterr().err
+    assert "b1c1.yaml: field 'calipers[0]" in err  # the unknown key or the height past the tip, named
+    assert not (out / "results.csv").exists()
 
 
 def test_malformed_yaml_stops_with_file_and_line(tmp_path: Path, capsys):

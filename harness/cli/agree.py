@@ -39,8 +39,8 @@ def main(a: argparse.Namespace) -> int:
         names += f",{REFERENCE}"
     usable, skipped = common.backends(names)
     proto = get_protocol(a.protocol)
-    _, trials = common.trials(a)
     out = common.out_dir(a.out, "agree")
+    _, trials = common.trials(a)
     ex = common.executor(a)
     print(f"canebench agree: {len(trials)} trials x {len(usable)} backends ({','.join(usable)}), protocol {proto.name}")
     t0 = time.perf_counter()

@@ -27,9 +27,14 @@ def main(a: argparse.Namespace) -> int:
             b = info.cls()
             for p in PROTOCOLS.values():
                 st = b.settings(p)
+                ans = b.answer(p) if hasattr(b, "answer") else info.kind
                 if a.verbose:
-                    print(f"    {p.name}: {st}")
+                    print(f"    {p.name}: answer={ans}; {st}")
                 else:
-                    print(f"    {p.name}: integrator={st.get('integrator')}; dt={st.get('dt')}; springs={st.get('springs')}")
+                    print(f"    {p.name}: answer={ans}; integrator={st.get('integrator')}; dt={st.get('dt')}; "
+                          f"springs={st.get('springs')}")
+                if ans == "quasi-static":
+                    print("        (quasi-static: no engine time step is taken; the answer tests the engine's "
+                          "kinematics, inverse dynamics and the chain's compilation, not its integrator)")
     return 0
 

@@ -14,6 +14,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     be.add_argument("--runner", action="store_true",
                     help="job runner overhead: N Pinocchio jobs on the serial, local and Dask executors")
     be.add_argument("--n-jobs", type=int, default=1000, help="jobs for --runner (default 1000)")
+    be.add_argument("--memory", action="store_true",
+                    help="peak memory of Pinocchio's linear stiffness at 20, 160 and 320 links")
     be.add_argument("--backends", default="mujoco", help="comma-separated; MuJoCo is always included as the baseline")
     be.add_argument("--steps", type=int, default=None, help="protocol steps per trial (default: full trial)")
     be.set_defaults(fn=main)
@@ -26,6 +28,8 @@ def main(a: argparse.Namespace) -> int:
         bench.bench_beam(trials=a.trials or "b1c1t1,b3c1t2,b5c3t1,b6c2t3")
     elif a.engines:
         bench.bench_engines(trials=a.trials, backends=None if a.backends == "mujoco" else a.backends.split(","))
+    elif a.memory:
+        bench.bench_memory()
     elif a.runner:
         bench.bench_runner(n_jobs=a.n_jobs)
     else:

@@ -38,6 +38,24 @@ def add_model_options(p: argparse.ArgumentParser) -> None:
 def add_data_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--field", help="dataset directory (push_points.csv + trials/); default: bundled synthetic set")
     p.add_argument("--trials", help="comma-separated globs on trial or cane ids, e.g. 'b1c*,b2c3t1'")
+    p.add_argument("--strict", action="store_true",
+                   help="treat input warnings (implausible units, folded or tip-first polylines) as errors")
+
+
+def input_warnings(strict: bool) -> None:
+    """Show each input warning once as one plain line; under ``--strict`` make it an error."""
+    import warnings
+
+    from ..errors import InputWarning
+
+    def show(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        if issubclass(category, InputWarning):
+            print(f"canebench: warning: {message}", file=sys.stderr)
+        else:
+            print(warnings.formatwarning(message, category, filename, lineno, line), file=sys.stderr, end="")
+
+    warnings.showwarning = show
+    warnings.simplefilter("error" if strict else "always", InputWarning)
 
 
 def out_dir(value: str | None, prefix: str) -> Path:
@@ -78,9 +96,27 @@ def executor(a: argparse.Namespace) -> Any:
 
 def trials(a: argparse.Namespace) -> tuple[Path, list]:
     from ..data.dataset import bundled_dataset, load_dataset
+    from ..errors import InputWarning
 
+    input_warnings(getattr(a, "strict", False))
     data_dir = Path(a.field) if a.field else bundled_dataset()
-    return data_dir, load_dataset(data_dir, a.trials)
+    try:
+        return data_dir, load_dataset(data_dir, a.trials)
+    except InputWarning as w:  # --strict
+        raise InputError(w.source, w.field, f"{w.message} (an error under --strict)") from None
+
+
+def assumptions(trials: list, config: Any) -> list[str]:
+    """The assumptions a run rests on, as they are true for this configuration.
+
+    A dataset's own statement about the modulus (e.g. the generator's "the
+    paper's 4.57 GPa") no longer holds when the configuration sets one.
+    """
+    out = sorted({s for t in trials for s in t.cane.provenance.get("assumptions", [])})
+    if getattr(config, "modulus_pa", None) is not None:
+        out = [s for s in out if not s.lower().startswith("modulus")]
+        out.append(f"modulus: {config.modulus_pa:.4g} Pa for every cane (model configuration)")
+    return out
 
 
 def backends(spec: str) -> tuple[list[str], dict[str, str]]:

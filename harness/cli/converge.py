@@ -25,7 +25,12 @@ def main(a: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     segs = tuple(int(s) for s in a.segments.split(","))
     r = converge(out, a.trials, segs, progress=lambda i, n, tid: print(f"[{i:3d}/{n}] {tid}", flush=True))
-    print(f"beam: tip-deflection error vs RK4 elements, observed order {r.rod_order:.2f}")
+    print(r.beam_mesh_summary)
+    if r.beam_mesh is not None and len(r.beam_mesh):
+        worst = r.beam_mesh.sort_values("rel_error", ascending=False).head(5)
+        print(worst[["trial", "elements", "rel_error", "pass", "rel_error_continuum", "rest_offset_m"]]
+              .to_string(index=False, float_format=lambda v: f"{v:.2e}"))
+    print(f"\nbeam: tip-deflection error vs RK4 elements, observed order {r.rod_order:.2f}")
     print(r.rod.to_string(index=False, float_format=lambda v: f"{v:.3e}"))
     print("\nchain stiffness / beam stiffness - 1 over the bundled canes (small deflection, gravity off):")
     print(r.summary.to_string(index=False, float_format=lambda v: f"{v:.4f}"))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..errors import CanebenchError
+from ..errors import CanebenchError, InputWarning
 from . import agree, backends, bench, converge, generate, report, run
 
 COMMANDS = (run, report, agree, converge, backends, generate, bench)
@@ -25,6 +25,9 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.fn(args) or 0)
     except CanebenchError as exc:
         print(f"canebench: error: {exc}", file=sys.stderr)
+        return 2
+    except InputWarning as exc:  # raised as an error under --strict
+        print(f"canebench: error: {exc} (--strict)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("canebench: interrupted", file=sys.stderr)

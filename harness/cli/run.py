@@ -17,6 +17,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--out", help="run folder (default canebench-runs/run-<time>); an existing one resumes")
     r.add_argument("--limit", type=int, help="only the first N selected trials")
     r.add_argument("--max-steps", type=int, help="cap on protocol steps per trial")
+    r.add_argument("--fit-window", type=float, metavar="MM",
+                   help="fit stiffness over the first MM of the push, field and simulation alike (default: all)")
     common.add_model_options(r)
     common.add_executor_options(r)
     r.add_argument("--no-report", action="store_true")
@@ -27,8 +29,10 @@ def main(a: argparse.Namespace) -> int:
     from ..execute.pipeline import field_stage, make_jobs
     from ..execute.provenance import provenance
     from ..execute.runner import run_jobs
+    from ..errors import InputError
     from ..probe.protocol import get_protocol
 
+    out = common.out_dir(a.out, "run")  # a bad --out fails before any work
     data_dir, trials = common.trials(a)
     if a.limit:
         trials = trials[: a.limit]
@@ -37,18 +41,21 @@ def main(a: argparse.Namespace) -> int:
         print("no usable backend", file=sys.stderr)
         return 2
     proto = get_protocol(a.protocol)
+    if a.fit_window is not None:
+        if not a.fit_window > 0:
+            raise InputError("--fit-window", "fit_window_mm", f"must be > 0 mm, got {a.fit_window}")
+        proto = proto.replace(fit_window_mm=a.fit_window)
     config = common.model_config(a)
     ex = common.executor(a)
-    out = common.out_dir(a.out, "run")
     synthetic = all(t.cane.provenance.get("synthetic", False) for t in trials)
-    assumptions = sorted({s for t in trials for s in t.cane.provenance.get("assumptions", [])})
+    assumptions = common.assumptions(trials, config)
     print(f"canebench run: {len(trials)} trials from {data_dir}"
           f"{' (SYNTHETIC data)' if synthetic else ''}, backends {','.join(usable)}, protocol {proto.name}, "
           f"executor {a.executor} -> {out}")
     for s in assumptions:
         print(f"  assumption: {s}")
     t0 = time.perf_counter()
-    fields = field_stage(trials)
+    fields = field_stage(trials, proto.fit_window_mm)
     jobs = make_jobs(trials, usable, proto, config, fields, a.max_steps)
     meta = provenance(usable, proto, config, {
         "command": " ".join(sys.argv), "dataset": str(data_dir.resolve()),

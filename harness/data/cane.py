@@ -14,11 +14,29 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..errors import InputError
+from ..errors import InputError, warn_input
 
 DEFAULT_DENSITY = 580.0  # kg/m^3, paper (Zhang et al.)
 DEFAULT_DAMPING = 0.15  # N m s/rad, paper (Pivato et al.)
 DORMANT_MEAN_MODULUS = 4.57e9  # Pa, paper's dormant-season mean (naive case)
+
+# Every key the format knows, per level: anything else is a typo that would
+# otherwise be dropped silently (a misspelt modulus takes the default).
+KEYS = {
+    "<root>": ("id", "polyline", "calipers", "push_points", "material", "provenance"),
+    "polyline": ("raw", "points"),
+    "calipers": ("s", "height", "diameter"),
+    "push_points": ("id", "s", "height", "direction", "trial"),
+    "material": ("flexural_modulus", "density", "joint_damping"),
+}
+# Hard bounds: beyond them a value is not a cane in SI units at all.
+MAX_COORD_M = 1.0e4
+MAX_DIAMETER_M = 1.0
+# Plausible ranges: outside them a warning names the likely unit mistake.
+PLAUSIBLE_LENGTH_M = (0.05, 6.0)
+PLAUSIBLE_DIAMETER_M = (0.5e-3, 0.05)
+PLAUSIBLE_MODULUS_PA = (0.1e9, 40e9)
+PLAUSIBLE_DENSITY = (100.0, 1500.0)
 
 
 @dataclass(frozen=True)
@@ -108,6 +126,17 @@ def _num(value: Any, src: str, fld: str, *, positive: bool = False, nonneg: bool
     return x
 
 
+def _check_keys(d: dict, allowed: tuple[str, ...], src: str, where: str) -> None:
+    import difflib
+
+    for k in d:
+        if k not in allowed:
+            close = difflib.get_close_matches(str(k), allowed, n=1, cutoff=0.6)
+            hint = f"; did you mean '{close[0]}'?" if close else f"; known: {', '.join(allowed)}"
+            fld = str(k) if where == "<root>" else f"{where}.{k}"
+            raise InputError(src, fld, f"unknown key{hint}")
+
+
 def _location(d: dict, src: str, fld: str) -> Location:
     has_s, has_h = "s" in d, "height" in d
     if has_s == has_h:
@@ -122,6 +151,7 @@ def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
     src = str(source)
     if not isinstance(data, dict):
         raise InputError(src, "<root>", "expected a mapping at the top level")
+    _check_keys(data, KEYS["<root>"], src, "<root>")
     for key in ("id", "polyline", "calipers", "push_points"):
         if key not in data:
             raise InputError(src, key, "missing required field")
@@ -131,7 +161,11 @@ def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
 
     poly = data["polyline"]
     if isinstance(poly, dict):
-        raw = bool(poly.get("raw", True))
+        _check_keys(poly, KEYS["polyline"], src, "polyline")
+        raw_flag = poly.get("raw", True)
+        if not isinstance(raw_flag, bool):
+            raise InputError(src, "polyline.raw", f"expected true or false, got {raw_flag!r}")
+        raw = raw_flag
         pts = poly.get("points")
     else:
         raw, pts = True, poly
@@ -143,6 +177,9 @@ def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
             raise InputError(src, f"polyline.points[{i}]", f"expected [x, y, z], got {p!r}")
         for j in range(3):
             arr[i, j] = _num(p[j], src, f"polyline.points[{i}][{j}]")
+            if abs(arr[i, j]) > MAX_COORD_M:
+                raise InputError(src, f"polyline.points[{i}][{j}]",
+                                 f"{arr[i, j]:.6g} m is out of range (|x| <= {MAX_COORD_M:g} m): coordinates are in metres")
     seg = np.linalg.norm(np.diff(arr, axis=0), axis=1)
     if np.any(seg <= 1e-9):
         i = int(np.argmax(seg <= 1e-9))
@@ -158,7 +195,12 @@ def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
         f = f"calipers[{i}]"
         if not isinstance(c, dict) or "diameter" not in c:
             raise InputError(src, f, "expected a mapping with 'diameter' and 's' or 'height'")
-        calipers.append(Caliper(_location(c, src, f), _num(c["diameter"], src, f"{f}.diameter", positive=True)))
+        _check_keys(c, KEYS["calipers"], src, f)
+        dia = _num(c["diameter"], src, f"{f}.diameter", positive=True)
+        if dia > MAX_DIAMETER_M:
+            raise InputError(src, f"{f}.diameter", f"{dia:g} m is out of range (<= {MAX_DIAMETER_M:g} m): "
+                                                    "diameters are in metres (this looks like millimetres)")
+        calipers.append(Caliper(_location(c, src, f), dia))
 
     pps = data["push_points"]
     if not isinstance(pps, list) or not pps:
@@ -168,6 +210,7 @@ def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
         f = f"push_points[{i}]"
         if not isinstance(p, dict) or "id" not in p:
             raise InputError(src, f, "expected a mapping with 'id' and 's' or 'height'")
+        _check_keys(p, KEYS["push_points"], src, f)
         pid = str(p["id"])
         if pid in seen:
             raise InputError(src, f"{f}.id", f"duplicate push point id {pid!r}")
@@ -187,6 +230,7 @@ def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
     mat = data.get("material", {}) or {}
     if not isinstance(mat, dict):
         raise InputError(src, "material", "expected a mapping")
+    _check_keys(mat, KEYS["material"], src, "material")
     material = Material(
         flexural_modulus=_num(mat.get("flexural_modulus", DORMANT_MEAN_MODULUS), src, "material.flexural_modulus", positive=True),
         density=_num(mat.get("density", DEFAULT_DENSITY), src, "material.density", positive=True),
@@ -195,7 +239,72 @@ def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
     prov = data.get("provenance", {}) or {}
     if not isinstance(prov, dict):
         raise InputError(src, "provenance", "expected a mapping")
-    return CaneDescription(cid, arr, raw, tuple(calipers), tuple(push_points), material, dict(prov), src)
+    cane = CaneDescription(cid, arr, raw, tuple(calipers), tuple(push_points), material, dict(prov), src)
+    _check_extent(cane)
+    _check_plausible(cane)
+    return cane
+
+
+def _extent_error(cane: CaneDescription, fld: str, where: Location, length: float, zmin: float, zmax: float) -> None:
+    tol = 1e-3  # a caliper at the very tip, up to 1 mm past the digitized end, is a rounding matter
+    if where.s is not None and where.s > length + tol:
+        raise InputError(cane.source, f"{fld}.s", f"{where.s:.4g} m is beyond the cane's length {length:.4g} m")
+    if where.height is not None and not (zmin - tol <= where.height <= zmax + tol):
+        raise InputError(cane.source, f"{fld}.height", f"{where.height:.4g} m is outside the cane's heights "
+                                                       f"{zmin:.4g}..{zmax:.4g} m")
+
+
+def _check_extent(cane: CaneDescription) -> None:
+    """Push points and calipers must lie on the cane: an error at load, not at chain build."""
+    pts = cane.polyline
+    length = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+    zmin, zmax = float(pts[:, 2].min()), float(pts[:, 2].max())
+    for i, c in enumerate(cane.calipers):
+        _extent_error(cane, f"calipers[{i}]", c.where, length, zmin, zmax)
+    for i, p in enumerate(cane.push_points):
+        _extent_error(cane, f"push_points[{i}]", p.where, length, zmin, zmax)
+
+
+def _check_plausible(cane: CaneDescription) -> None:
+    """Warn (an error under --strict) about magnitudes that look like the wrong unit, and odd shapes."""
+    src, pts = cane.source, cane.polyline
+    seg = np.diff(pts, axis=0)
+    length = float(np.linalg.norm(seg, axis=1).sum())
+    lo, hi = PLAUSIBLE_LENGTH_M
+    if length > hi:
+        warn_input(src, "polyline.points", f"cane length {length:.4g} m is implausible for a blueberry cane "
+                                           f"({lo:g}-{hi:g} m){'; looks like millimetres' if length > 50 else ''}")
+    elif length < lo:
+        warn_input(src, "polyline.points", f"cane length {length:.4g} m is implausibly short ({lo:g}-{hi:g} m)")
+    lo, hi = PLAUSIBLE_DIAMETER_M
+    for i, c in enumerate(cane.calipers):
+        if c.diameter > hi:
+            unit = "; looks like millimetres" if c.diameter >= 0.5 else ""
+            warn_input(src, f"calipers[{i}].diameter", f"{c.diameter:.4g} m is implausible ({lo:g}-{hi:g} m){unit}")
+        elif c.diameter < lo:
+            warn_input(src, f"calipers[{i}].diameter", f"{c.diameter:.4g} m is implausibly thin ({lo:g}-{hi:g} m)")
+    E = cane.material.flexural_modulus
+    lo, hi = PLAUSIBLE_MODULUS_PA
+    if not (lo <= E <= hi):
+        unit = "; looks like GPa, not Pa" if E < 1e3 else ("; looks like MPa, not Pa" if E < 1e6 else "")
+        warn_input(src, "material.flexural_modulus", f"{E:.4g} Pa is implausible for green wood ({lo:g}-{hi:g} Pa){unit}")
+    rho = cane.material.density
+    if not (PLAUSIBLE_DENSITY[0] <= rho <= PLAUSIBLE_DENSITY[1]):
+        warn_input(src, "material.density", f"{rho:.4g} kg/m^3 is implausible for wood "
+                                            f"({PLAUSIBLE_DENSITY[0]:g}-{PLAUSIBLE_DENSITY[1]:g})")
+    if len(pts) >= 2 and pts[0, 2] > pts[-1, 2] + 1e-3:
+        warn_input(src, "polyline.points", f"the base (first point, z = {pts[0, 2]:.4g} m) is above the tip "
+                                           f"(last point, z = {pts[-1, 2]:.4g} m): written tip first?")
+    if len(seg) >= 2:
+        u = seg / np.linalg.norm(seg, axis=1)[:, None]
+        turn = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", u[:-1], u[1:]), -1.0, 1.0)))
+        i = int(np.argmax(turn))
+        if turn[i] > 90.0:
+            n_bad = int((turn > 90.0).sum())
+            warn_input(src, f"polyline.points[{i + 1}]",
+                       f"the polyline doubles back here (turning angle {turn[i]:.0f} degrees"
+                       f"{f'; {n_bad} such points' if n_bad > 1 else ''}): a digitizing error? The smoothed "
+                       "centreline keeps the fold")
 
 
 def load_cane(path: str | Path) -> CaneDescription:
@@ -205,6 +314,8 @@ def load_cane(path: str | Path) -> CaneDescription:
         text = path.read_text()
     except OSError as exc:
         raise InputError(str(path), "<file>", f"cannot read: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise InputError(str(path), "<file>", "not a text file (cannot decode as UTF-8); expected YAML") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:

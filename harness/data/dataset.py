@@ -15,10 +15,11 @@ import fnmatch
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from .cane import CaneDescription, cane_from_dict, load_cane
-from ..errors import InputError
+from ..errors import InputError, warn_input
 
 STRAIGHT_ASSUMPTION = ("geometry assumed: straight vertical cane from the ground to the highest push point "
                        "(the field data has no polylines)")
@@ -52,18 +53,33 @@ def read_push_points(path: Path) -> pd.DataFrame:
         raise InputError(src, "<file>", "not found (a dataset needs push_points.csv)") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(src, "<file>", f"malformed CSV: {exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(src, "<file>", "not a text file (cannot decode as UTF-8); expected CSV") from None
     for col in ("bush", "cane", "trial", "height_mm", "diameter_mm", "file"):
         if col not in df.columns:
             raise InputError(src, col, "missing column")
     for col in ("bush", "cane", "trial", "height_mm", "diameter_mm"):
         vals = pd.to_numeric(df[col], errors="coerce")
-        if vals.isna().any():
-            i = int(vals.isna().to_numpy().argmax())
-            raise InputError(src, col, f"row {i + 2}: not a number ({df[col].iloc[i]!r})")
+        bad = ~np.isfinite(vals.to_numpy(float))
+        if bad.any():
+            i = int(bad.argmax())
+            raise InputError(src, col, f"row {i + 2}: not a finite number ({df[col].iloc[i]!r})")
         if col in ("height_mm", "diameter_mm") and (vals <= 0).any():
             i = int((vals <= 0).to_numpy().argmax())
             raise InputError(src, col, f"row {i + 2}: must be > 0, got {vals.iloc[i]}")
         df[col] = vals
+    dup = df.duplicated(["bush", "cane", "trial"])
+    if dup.any():
+        i = int(dup.to_numpy().argmax())
+        raise InputError(src, "trial", f"row {i + 2}: bush {df.bush.iloc[i]:g} cane {df.cane.iloc[i]:g} trial "
+                                       f"{df.trial.iloc[i]:g} appears twice")
+    for col, (lo, hi), unit in (("height_mm", (20.0, 4000.0), "metres"), ("diameter_mm", (0.5, 50.0), "metres")):
+        v = df[col].to_numpy(float)
+        odd = (v < lo) | (v > hi)
+        if odd.any():
+            i = int(odd.argmax())
+            hint = f"; looks like {unit}, not mm" if v[i] < lo else ""
+            warn_input(src, col, f"row {i + 2}: {v[i]:g} mm is implausible ({lo:g}-{hi:g} mm){hint}")
     return df
 
 
@@ -94,16 +110,37 @@ def load_dataset(directory: str | Path, select: str | None = None) -> list[Trial
     pp = read_push_points(d / "push_points.csv")
     yaml_dir = d / "canes"
     descriptions: dict[str, CaneDescription] = {}
-    if yaml_dir.is_dir():
-        for y in sorted(yaml_dir.glob("*.yaml")):
+    has_yaml = yaml_dir.is_dir()
+    if has_yaml:
+        for y in sorted([*yaml_dir.glob("*.yaml"), *yaml_dir.glob("*.yml")]):
             c = load_cane(y)
+            if c.id in descriptions:
+                raise InputError(str(y), "id", f"cane id {c.id!r} is also used by {descriptions[c.id].source}: "
+                                               "every description needs its own id")
             descriptions[c.id] = c
+    pp_src = str(d / "push_points.csv")
+    wanted = {f"b{int(b)}c{int(c)}" for b, c in zip(pp.bush, pp.cane)}
+    if has_yaml:
+        # a description nobody probes, or a probed cane without one, is a mismatch:
+        # silently falling back to a straight cane would change the physics
+        stray = sorted(set(descriptions) - wanted)
+        if stray:
+            c = descriptions[stray[0]]
+            raise InputError(c.source, "id", f"cane id {c.id!r} matches no bush/cane row of {pp_src} "
+                                             f"(rows name: {', '.join(sorted(wanted))})")
+        missing = sorted(wanted - set(descriptions))
+        if missing:
+            raise InputError(pp_src, "cane", f"no description in {yaml_dir} for cane(s) {', '.join(missing)} "
+                                             "(ids must match b<bush>c<cane>)")
     trials = []
     for (bush, cane), rows in pp.groupby(["bush", "cane"], sort=True):
         cid = f"b{int(bush)}c{int(cane)}"
-        desc = descriptions.get(cid) or straight_cane(int(bush), int(cane), rows, str(d / "push_points.csv"))
+        desc = descriptions.get(cid) or straight_cane(int(bush), int(cane), rows, pp_src)
         for r in rows.itertuples():
             tid = f"{cid}t{int(r.trial)}"
+            if str(int(r.trial)) not in {p.id for p in desc.push_points}:
+                raise InputError(desc.source, "push_points", f"no push point with id '{int(r.trial)}' for trial "
+                                                             f"{tid} of {pp_src}")
             trials.append(Trial(tid, desc, str(int(r.trial)), (d / str(r.file)).resolve(), int(bush), int(cane),
                                 int(r.trial), float(r.height_mm), float(r.diameter_mm)))
     if select:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
+from ..errors import InputError, warn_input
 
 COLUMNS = {
     "iteration": "Iteration",
@@ -68,6 +68,10 @@ def read_rig_csv(path: str | Path) -> RigTrial:
             raise InputError(src, col, f"row {i + 2}: not a finite number ({df[col].iloc[i]!r})")
         out[key] = vals
     disp = out["disp"] - out["disp"][0]
+    step = float(np.median(np.diff(disp))) if len(disp) > 1 else 0.0
+    if 0 < step < 0.01:
+        warn_input(src, COLUMNS["disp"], f"median step {step:.3g} per sample: the rig steps 0.5 mm, so this "
+                                         "looks like metres, not mm")
     if np.any(np.diff(disp) <= 0):
         i = int(np.argmax(np.diff(disp) <= 0)) + 1
         raise InputError(src, COLUMNS["disp"], f"row {i + 2}: displacement does not increase")

@@ -28,6 +28,7 @@ import sys
 import time
 from abc import ABC, abstractmethod
 from collections import deque
+from pathlib import Path
 from multiprocessing.connection import wait
 from typing import Any, Iterator
 
@@ -49,8 +50,14 @@ class Executor(ABC):
     name = ""
 
     @abstractmethod
-    def map(self, jobs: list[Job], timeout_s: float | None) -> Iterator[tuple[Job, JobResult]]:
-        """Yield ``(job, result)`` for every job, in completion order."""
+    def map(self, jobs: list[Job], timeout_s: float | None,
+            workdir: Path | None = None) -> Iterator[tuple[Job, JobResult]]:
+        """Yield ``(job, result)`` for every job, in completion order.
+
+        ``workdir`` is where jobs run (the run folder), so files an engine
+        writes into its working directory (MuJoCo's ``MUJOCO_LOG.TXT``) land
+        there and not wherever the command was started.
+        """
 
     def describe(self) -> dict[str, Any]:
         return {"executor": self.name}
@@ -63,9 +70,12 @@ EXECUTORS: Registry[type[Executor]] = Registry("executor")
 class SerialExecutor(Executor):
     name = "serial"
 
-    def map(self, jobs: list[Job], timeout_s: float | None) -> Iterator[tuple[Job, JobResult]]:
+    def map(self, jobs: list[Job], timeout_s: float | None,
+            workdir: Path | None = None) -> Iterator[tuple[Job, JobResult]]:
         for job in jobs:
-            yield job, execute(job, timeout_s)
+            with contextlib.chdir(workdir) if workdir is not None else contextlib.nullcontext():
+                res = execute(job, timeout_s)
+            yield job, res
 
 
 @contextlib.contextmanager
@@ -90,9 +100,9 @@ def _no_phantom_main() -> Iterator[None]:
 
 
 class _Worker:
-    def __init__(self, ctx: Any, lifeline: Any, timeout_s: float | None) -> None:
+    def __init__(self, ctx: Any, lifeline: Any, timeout_s: float | None, workdir: Path | None = None) -> None:
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=worker_main, args=(child, lifeline, timeout_s), daemon=True)
+        self.proc = ctx.Process(target=worker_main, args=(child, lifeline, timeout_s, workdir), daemon=True)
         with _no_phantom_main():
             self.proc.start()
         child.close()
@@ -126,7 +136,8 @@ class LocalExecutor(Executor):
     def describe(self) -> dict[str, Any]:
         return {"executor": self.name, "workers": self.n, "start_method": self.start_method}
 
-    def map(self, jobs: list[Job], timeout_s: float | None) -> Iterator[tuple[Job, JobResult]]:
+    def map(self, jobs: list[Job], timeout_s: float | None,
+            workdir: Path | None = None) -> Iterator[tuple[Job, JobResult]]:
         if not jobs:
             return
         ctx = mp.get_context(self.start_method)
@@ -134,7 +145,7 @@ class LocalExecutor(Executor):
             ctx.set_forkserver_preload(["canebench.execute.worker"])
         # the parent holds the only writer; its death closes the pipe and the workers exit
         life_r, life_w = ctx.Pipe(duplex=False)
-        workers = [_Worker(ctx, life_r, timeout_s) for _ in range(min(self.n, len(jobs)))]
+        workers = [_Worker(ctx, life_r, timeout_s, workdir) for _ in range(min(self.n, len(jobs)))]
         queue = deque(jobs)
         hard = (timeout_s + grace(timeout_s)) if timeout_s and timeout_s > 0 else None
         try:
@@ -153,7 +164,7 @@ class LocalExecutor(Executor):
                         res = failed_result(job, "failed", f"worker process died (exit code {w.proc.exitcode})",
                                             time.monotonic() - w.started)
                         w.kill()
-                        workers[workers.index(w)] = w = _Worker(ctx, life_r, timeout_s)
+                        workers[workers.index(w)] = w = _Worker(ctx, life_r, timeout_s, workdir)
                     w.job = None
                     yield job, res
                     if queue:
@@ -164,7 +175,7 @@ class LocalExecutor(Executor):
                         if w.job is not None and now - w.started > hard:
                             job = w.job
                             w.kill()
-                            workers[i] = nw = _Worker(ctx, life_r, timeout_s)
+                            workers[i] = nw = _Worker(ctx, life_r, timeout_s, workdir)
                             yield job, failed_result(job, "timeout", f"timeout: no answer {hard:g} s after start "
                                                      "(worker killed)", now - w.started)
                             if queue:
@@ -207,7 +218,9 @@ class DaskExecutor(Executor):
     def describe(self) -> dict[str, Any]:
         return {"executor": self.name, "scheduler": self.scheduler or f"LocalCluster({self.n} workers)"}
 
-    def map(self, jobs: list[Job], timeout_s: float | None) -> Iterator[tuple[Job, JobResult]]:
+    def map(self, jobs: list[Job], timeout_s: float | None,
+            workdir: Path | None = None) -> Iterator[tuple[Job, JobResult]]:
+        # workdir is not applied: Dask workers may be other machines (their own working directories)
         if not jobs:
             return
         from dask.distributed import Client, LocalCluster

@@ -34,9 +34,9 @@ from ..registry import backend_version, discover, get_backend
 from .jobs import Job, JobResult, config_hash
 
 RESULT_COLUMNS = [
-    "trial", "cane", "push_point", "bush", "backend", "protocol", "k_sim", "k_field", "log_ratio", "status",
+    "trial", "cane", "push_point", "bush", "backend", "answer", "protocol", "k_sim", "k_field", "log_ratio", "status",
     "reason", "wall_s", "cpu_s", "n_steps", "n_samples", "r2_sim", "k_linear", "n_links", "height_mm", "diameter_mm",
-    "field_usable", "field_reason", "synthetic", "chain_hash", "config_hash", "job_key",
+    "field_usable", "field_reason", "synthetic", "assumptions", "chain_hash", "config_hash", "job_key",
 ]
 SIM_STATUSES = ("ok", "failed", "timeout")
 
@@ -63,9 +63,12 @@ class FieldResult:
 
     def row(self) -> dict[str, Any]:
         ff = self.fit
+        geo = "; ".join(a for a in self.trial.cane.provenance.get("assumptions", []) if a.startswith("geometry"))
         if ff is None:
-            return {"trial": self.trial.id, "usable": False, "reason": self.reason}
-        return {"trial": self.trial.id, "k_field": ff.k_n_per_mm, "r2": ff.r2, "rms_n": ff.rms_n,
+            return {"trial": self.trial.id, "usable": False, "reason": self.reason, "assumptions": geo}
+        return {"trial": self.trial.id, "assumptions": geo, "k_field": ff.k_n_per_mm, "k_se": ff.se,
+                "k_ci_low": ff.ci_low, "k_ci_high": ff.ci_high, "window_mm": ff.window_mm,
+                "k_first_10mm": ff.k_first_10mm, "r2": ff.r2, "rms_n": ff.rms_n,
                 "n_contact": ff.n_contact, "onset_mm": ff.onset_mm, "tare_gf": ff.tare_gf, "usable": ff.usable,
                 "reason": ff.reason, "flags": "; ".join(ff.flags)}
 
@@ -77,20 +80,36 @@ class FieldResult:
                  "force_n": float(f)} for i, (x, f) in enumerate(zip(ff.displacement_mm, ff.force_n))]
 
 
-def field_fit_for(trial: Trial) -> FieldFit | None:
+def trial_assumptions(trial: Trial, config: ModelConfig) -> str:
+    """The assumptions behind one row, true for its configuration ("; "-joined).
+
+    A dataset's statement about the modulus no longer holds when the
+    configuration sets one, so it is replaced, never left standing.
+    """
+    out = list(trial.cane.provenance.get("assumptions", []))
+    if config.modulus_pa is not None:
+        out = [a for a in out if not a.lower().startswith("modulus")]
+        out.append(f"modulus: {config.modulus_pa:.4g} Pa for every cane (model configuration)")
+    return "; ".join(out)
+
+
+def field_fit_for(trial: Trial, window_mm: float | None = None) -> FieldFit | None:
     if trial.csv is None or not trial.csv.exists():
         return None
-    return extract_field_stiffness(read_rig_csv(trial.csv))
+    return extract_field_stiffness(read_rig_csv(trial.csv), window_mm=window_mm)
 
 
-def field_stage(trials: Iterable[Trial]) -> dict[str, FieldResult]:
-    """Field stiffness of every trial, by trial id (a bad CSV is a reason, not a crash)."""
+def field_stage(trials: Iterable[Trial], window_mm: float | None = None) -> dict[str, FieldResult]:
+    """Field stiffness of every trial, by trial id (a bad CSV is a reason, not a crash).
+
+    ``window_mm`` must be the protocol's ``fit_window_mm`` so both sides of a score use one window.
+    """
     out: dict[str, FieldResult] = {}
     for t in trials:
         if t.id in out:
             continue
         try:
-            ff = field_fit_for(t)
+            ff = field_fit_for(t, window_mm)
             reason = ff.reason if ff is not None else "no field trial"
         except Exception as exc:  # bad field CSV: still simulate, but do not score
             ff, reason = None, f"field data unreadable: {exc}"
@@ -111,7 +130,7 @@ def make_jobs(trials: list[Trial], backends: list[str], proto: Protocol,
     labels : list of dict, optional
         Per-trial labels copied into each row (a study's sample index...).
     """
-    fields = fields if fields is not None else field_stage(trials)
+    fields = fields if fields is not None else field_stage(trials, proto.fit_window_mm)
     if isinstance(configs, ModelConfig):
         configs = [configs] * len(trials)
     if len(configs) != len(trials):
@@ -145,7 +164,8 @@ def run_job(job: Job) -> JobResult:
         return JobResult(job.key, row)
     backend = job.backend_cls() if job.backend_cls is not None else get_backend(job.backend)
     tr = run_probe(backend, chain, job.protocol, job.n_steps)
-    fit = tr.fit() if tr.status == "ok" else None
+    win = job.protocol.fit_window_mm
+    fit = tr.fit(win * 1e-3 if win is not None else None) if tr.status == "ok" else None
     status, reason = tr.status, tr.reason
     if status == "ok" and fit is None:
         status, reason = "failed", "too few samples to fit a slope"
@@ -159,6 +179,7 @@ def run_job(job: Job) -> JobResult:
         r2_sim=fit.r2 if fit else math.nan, k_linear=tr.extras.get("k_linear", math.nan) * 1e-3,
         n_links=chain.n_links, chain_hash=chain.fingerprint(), settings=json.dumps(tr.settings, sort_keys=True),
         controller=tr.extras.get("controller", ""), dt=tr.extras.get("dt", math.nan),
+        answer=tr.extras.get("answer", ""),
     )
     return JobResult(job.key, row, [float(x) for x in tr.displacement], [float(f) for f in tr.force])
 
@@ -177,11 +198,14 @@ def score(job: Job, result: JobResult, field: FieldResult) -> dict[str, Any]:
         "height_mm": t.height_mm, "diameter_mm": t.diameter_mm,
         "field_usable": bool(field.fit is not None and field.fit.usable), "field_reason": field.reason,
         "synthetic": bool(t.cane.provenance.get("synthetic", False)),
+        "assumptions": trial_assumptions(t, job.config),
         "config_hash": config_hash(job.config), "job_key": job.key,
         **result.row, **job.labels,
     }
     k_field = field.k
     row["k_field"] = k_field
+    if field.fit is not None and field.fit.usable:
+        row["k_field_ci_low"], row["k_field_ci_high"] = field.fit.ci_low, field.fit.ci_high
     row["log_ratio"] = math.nan
     if row["status"] == "ok":
         if k_field > 0:

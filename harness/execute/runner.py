@@ -145,8 +145,8 @@ def run_jobs(jobs: list[Job], out_dir: str | Path | None = None, executor: Execu
     t0 = time.perf_counter()
     executor = executor or LocalExecutor()
     progress = progress or Progress()
-    fields = fields if fields is not None else field_stage(j.trial for j in jobs)
-    out = Path(out_dir) if out_dir is not None else None
+    fields = fields if fields is not None else field_stage((j.trial for j in jobs), jobs[0].protocol.fit_window_mm if jobs else None)
+    out = Path(out_dir).resolve() if out_dir is not None else None
     store = Store.in_folder(out, fresh=fresh) if out is not None else None
     keys = list(dict.fromkeys(j.key for j in jobs))
     done: dict[str, JobResult] = store.get_many(keys) if store is not None else {}
@@ -161,7 +161,7 @@ def run_jobs(jobs: list[Job], out_dir: str | Path | None = None, executor: Execu
         _write_state(out, run_meta, "running", len(keys), len(done), n_reused, [])
     interrupted = False
     progress.start(len(keys), n_reused, label)
-    gen = executor.map(todo, timeout_s)
+    gen = executor.map(todo, timeout_s, out)
     try:
         for job, res in gen:
             res.row.setdefault("trial", job.trial.id)
@@ -218,6 +218,6 @@ def run_trials(trials: list, backends: list[str], proto: Any, config: Any, out_d
     """
     from .pipeline import make_jobs
 
-    fields = field_stage(trials)
+    fields = field_stage(trials, proto.fit_window_mm)
     job_list = make_jobs(trials, backends, proto, config, fields, max_steps)
     return run_jobs(job_list, out_dir, executor or LocalExecutor(jobs), fields=fields, **kw)

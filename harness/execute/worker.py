@@ -42,8 +42,10 @@ def _watch_parent(lifeline: Any) -> None:
     os._exit(3)
 
 
-def worker_main(conn: Any, lifeline: Any, timeout_s: float | None) -> None:
+def worker_main(conn: Any, lifeline: Any, timeout_s: float | None, workdir: Any = None) -> None:
     """Loop: receive a job, run it, send the result; ``None`` ends the loop."""
+    if workdir is not None:
+        os.chdir(workdir)  # engine side files (MUJOCO_LOG.TXT) land in the run folder
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threading.Thread(target=_watch_parent, args=(lifeline,), daemon=True).start()

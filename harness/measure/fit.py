@@ -9,10 +9,11 @@ import numpy as np
 
 @dataclass(frozen=True)
 class LineFit:
-    slope: float  # N/m
-    intercept: float  # N
+    slope: float  # in y units per x unit
+    intercept: float
     r2: float
     n: int
+    se: float = float("nan")  # ordinary least-squares standard error of the slope
 
     @property
     def slope_n_per_mm(self) -> float:
@@ -34,4 +35,52 @@ def fit_line(x: np.ndarray, y: np.ndarray) -> LineFit | None:
     ss_res = ((y - a - b * x) ** 2).sum()
     ss_tot = ((y - ym) ** 2).sum()
     r2 = 1.0 - ss_res / ss_tot if ss_tot > 0 else 1.0
-    return LineFit(float(b), float(a), float(r2), int(len(x)))
+    se = float(np.sqrt(ss_res / (len(x) - 2) / sxx)) if len(x) > 2 else float("nan")
+    return LineFit(float(b), float(a), float(r2), int(len(x)), se)
+
+
+def window(x: np.ndarray, window: float | None) -> np.ndarray:
+    """Mask of the samples within ``window`` of the first one (all when ``None``)."""
+    x = np.asarray(x, float)
+    if window is None or len(x) == 0:
+        return np.ones(len(x), bool)
+    return x <= x[0] + window + 1e-12
+
+
+def bootstrap_slope_interval(x: np.ndarray, y: np.ndarray, n_boot: int = 1000, seed: int = 0,
+                             level: float = 0.95) -> tuple[float, float]:
+    """Percentile interval of the slope by an AR(1) sieve bootstrap of the residuals.
+
+    Residuals of a push are serially correlated (the cane settles, the load
+    cell drifts), so resampling them one by one would understate the spread
+    (so does a moving-block bootstrap with short blocks: 82 % coverage for
+    nominal 95 % on AR(1) noise with rho = 0.6 and 80 samples; the OLS
+    standard error covers 66 %). Here the residuals' lag-1 autoregression is
+    estimated, its innovations are resampled, new AR(1) residual series are
+    built and added to the fitted line, and the line is refitted ``n_boot``
+    times (seeded, reproducible): 91 % coverage in the same test, 90 % on
+    white noise (``tests/test_field.py``). Short pushes (20 samples) with
+    strongly correlated noise still under-cover (75 %): the interval is an
+    honest lower bound on the uncertainty there, not a guarantee.
+    """
+    from scipy.signal import lfilter
+
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    n = len(x)
+    fit = fit_line(x, y)
+    if n < 4 or fit is None:
+        return float("nan"), float("nan")
+    r = y - fit.intercept - fit.slope * x
+    den = float(r[:-1] @ r[:-1])
+    phi = float(np.clip((r[1:] @ r[:-1]) / den, -0.99, 0.99)) if den > 0 else 0.0
+    eps = r[1:] - phi * r[:-1]
+    eps = eps - eps.mean()
+    rng = np.random.default_rng(seed)
+    innov = rng.choice(eps, size=(n_boot, n))
+    innov[:, 0] /= np.sqrt(max(1.0 - phi * phi, 1e-6))  # stationary start
+    e = lfilter([1.0], [1.0, -phi], innov, axis=1)
+    yb = fit.intercept + fit.slope * x[None, :] + e
+    xm = x.mean()
+    slopes = ((x - xm)[None, :] * (yb - yb.mean(axis=1, keepdims=True))).sum(axis=1) / ((x - xm) ** 2).sum()
+    lo, hi = np.quantile(slopes, [(1 - level) / 2, (1 + level) / 2])
+    return float(lo), float(hi)

@@ -117,6 +117,18 @@ class ModelConfig:
             raise InputError(source, "discretization", f"must be 'greedy' or 'uniform', got {self.discretization!r}")
         if self.beam_elements < 2:
             raise InputError(source, "beam_elements", "must be >= 2")
+        from .stiffness import FORMULAS  # late: the formulas module registers on import
+
+        if self.stiffness_formula not in FORMULAS:
+            import difflib
+
+            close = difflib.get_close_matches(self.stiffness_formula, list(FORMULAS), n=1)
+            raise InputError(source, "stiffness_formula", f"unknown formula {self.stiffness_formula!r}"
+                             + (f"; did you mean {close[0]!r}?" if close else f"; known: {', '.join(FORMULAS)}"))
+        for name in ("segments", "min_segments", "chaikin_iterations", "beam_elements"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, int)):
+                raise InputError(source, name, f"must be an integer, got {v!r}")
 
     def replace(self, **changes: Any) -> "ModelConfig":
         """A copy with some fields changed (validated)."""
@@ -131,7 +143,10 @@ class ModelConfig:
             if key not in names:
                 raise InputError(source, key, f"unknown model setting; known: {', '.join(sorted(names))}")
             changes[key] = _coerce(raw, hints[key], source, key)
-        return self.replace(**changes)
+        try:
+            return self.replace(**changes)
+        except InputError as exc:  # name where the bad value came from
+            raise InputError(source, exc.field, exc.message) from None
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -163,11 +178,19 @@ def _coerce(raw: Any, hint: Any, source: str, key: str) -> Any:
     base = next((a for a in args if a is not type(None)), hint) if args else hint
     try:
         if base is bool:
-            return text.lower() in ("1", "true", "yes", "on")
+            low = text.lower()
+            if low in ("1", "true", "yes", "on"):
+                return True
+            if low in ("0", "false", "no", "off"):
+                return False
+            raise ValueError(text)
         if base is int:
             return int(text)
         if base is float:
-            return float(text)
+            v = float(text)
+            if not math.isfinite(v):
+                raise InputError(source, key, f"must be a finite number, got {raw!r}")
+            return v
         return text
     except ValueError as exc:
         raise InputError(source, key, f"cannot read {raw!r} as {getattr(base, '__name__', base)}") from exc

@@ -39,8 +39,13 @@ class ProbeTrace:
     def fail(self, reason: str) -> None:
         self.status, self.reason = "failed", reason
 
-    def fit(self) -> LineFit | None:
-        return fit_line(np.array(self.displacement), np.array(self.force))
+    def fit(self, window_m: float | None = None) -> LineFit | None:
+        """Slope of force on displacement, over the first ``window_m`` of the push (all of it by default)."""
+        x, f = np.array(self.displacement), np.array(self.force)
+        if window_m is not None and len(x):
+            keep = x <= window_m + 1e-12  # from the start of the push, as the field fit counts from onset
+            x, f = x[keep], f[keep]
+        return fit_line(x, f)
 
 
 class Diverged(Exception):
@@ -48,10 +53,35 @@ class Diverged(Exception):
 
 
 def _check(proto: Protocol, k: int, x: float, v: float, f: float, setpoint: float) -> None:
+    """Every sample: finite, force within reach of the rig's stop, probe following its setpoint."""
     if not (math.isfinite(x) and math.isfinite(v) and math.isfinite(f)):
         raise Diverged(f"non-finite state (NaN/inf) at step {k}")
-    if abs(f) > 100 * proto.force_limit_n or abs(x - setpoint) > 1.0:
-        raise Diverged(f"runaway at step {k}: force {f:.3g} N, displacement {x * 1e3:.3g} mm")
+    if abs(f) > proto.max_force_factor * proto.force_limit_n:
+        raise Diverged(f"force {f:.4g} N at step {k} is past {proto.max_force_factor:g}x the protocol's "
+                       f"{proto.force_limit_n:.3g} N limit within one {proto.step_m * 1e3:g} mm step "
+                       "(runaway, or a cane far too stiff for the protocol: check the input's units)")
+    if x - setpoint > proto.max_overshoot_m:
+        raise Diverged(f"overshoot at step {k}: probe at {x * 1e3:.4g} mm, setpoint {setpoint * 1e3:.4g} mm")
+    if x < -proto.max_overshoot_m:
+        raise Diverged(f"probe moved backwards at step {k}: {x * 1e3:.4g} mm")
+    if k >= proto.tracking_from and x < proto.min_tracking * setpoint:
+        raise Diverged(f"probe not following its setpoint at step {k}: moved {x * 1e3:.3g} mm against "
+                       f"{setpoint * 1e3:.3g} mm (the simulated cane is {setpoint / max(abs(x), 1e-300):.3g}x too "
+                       "stiff for the protocol's PID; check the input's units)")
+
+
+def _check_range(tr: "ProbeTrace", proto: Protocol) -> None:
+    """A slope needs the probe to have moved: at least a fifth of one protocol step.
+
+    The dynamic probe lags its setpoint (its first sample may sit below
+    0.5 mm), but a push that covers less than 0.1 mm in total measures the
+    solver's tolerance, not the cane (MuJoCo with E = 1e14 moves 1.6e-7 m).
+    """
+    if tr.status == "ok" and len(tr.displacement) >= 2:
+        span = max(tr.displacement) - min(tr.displacement)
+        if span < 0.2 * proto.step_m:
+            tr.fail(f"probe covered {span * 1e3:.3g} mm over the whole push (setpoint {tr.setpoint[-1] * 1e3:.3g} "
+                    "mm): no slope at the rig's resolution (a cane far too stiff, or mis-scaled input)")
 
 
 def probe_static(model: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
@@ -73,6 +103,7 @@ def probe_static(model: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
         tr.fail(str(exc))
     except Exception as exc:  # a solver that does not converge fails the trial, not the run
         tr.fail(f"static solve failed at step {len(tr.force) + 1}: {type(exc).__name__}: {exc}")
+    _check_range(tr, proto)
     try:
         tr.extras["k_linear"] = float(model.linear_stiffness())
     except NotImplementedError:
@@ -131,6 +162,7 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
         tr.fail(f"engine error at step {len(tr.force) + 1}: {type(exc).__name__}: {exc}")
     finally:
         tr.wall_s = time.perf_counter() - t0
+    _check_range(tr, proto)
     return tr
 
 
@@ -152,4 +184,5 @@ def run_probe(backend: Any, chain: Chain, proto: Protocol, n_steps: int) -> Prob
         tr.fail(f"build failed: {type(exc).__name__}: {exc}")
     tr.wall_s = time.perf_counter() - t0
     tr.settings = backend.settings(proto)
+    tr.extras["answer"] = backend.answer(proto) if hasattr(backend, "answer") else getattr(backend, "kind", "")
     return tr

@@ -48,6 +48,26 @@ class Protocol:
     max_settle_velocity : float
         Largest probe speed (m/s) tolerated in that window; a quasi-static push
         creeps at about 0.5 mm/s, so 10 mm/s means the trial has not settled.
+    min_tracking : float
+        From sample ``tracking_from`` on, the probe must have reached at least
+        this fraction of its setpoint. The PI law lags on stiff canes (its
+        ramp error is k v / Ki), but on every bundled trial the probe is past
+        47 % of the setpoint by the 10th sample; 1 % means it is not being
+        pushed at all (a mis-scaled or absurdly stiff cane), and a slope over
+        such a range measures solver noise, not the cane.
+    tracking_from : int
+        First sample at which tracking is checked (the integral needs time).
+    max_overshoot_m : float
+        Largest tolerated excess of displacement over setpoint (a quasi-static
+        push overshoots by at most 0.2 mm on the bundled trials).
+    max_force_factor : float
+        A sample beyond this multiple of ``force_limit_n`` fails the trial: one
+        0.5 mm step cannot legitimately jump past the rig's stop by that much.
+    fit_window_mm : float or None
+        Stiffness is the slope over the first ``fit_window_mm`` of the push
+        (from contact onset in the field, from the start in simulation), or
+        over all of it (``None``, the paper's choice). Field and simulation use
+        the same window.
     """
 
     name: str
@@ -62,6 +82,11 @@ class Protocol:
     force_limit_n: float = 1000.0 * GF_TO_N
     settle_window_s: float = 0.1
     max_settle_velocity: float = 0.01
+    min_tracking: float = 0.01
+    tracking_from: int = 10
+    max_overshoot_m: float = 1.0e-3
+    max_force_factor: float = 2.0
+    fit_window_mm: float | None = None
     description: str = ""
 
     def steps_per_sample(self, dt: float | None = None) -> int:

@@ -41,7 +41,8 @@ def baseline_path(protocol: str = "fast") -> Path:
 def agreement_table(results: pd.DataFrame, reference: str = REFERENCE) -> pd.DataFrame:
     """Per trial and backend: k_sim, the reference's k and their relative difference."""
     ref = results[results.backend == reference].set_index("trial")["k_sim"]
-    out = results[["trial", "backend", "protocol", "k_sim", "status", "reason", "wall_s", "n_links"]].copy()
+    cols = ["trial", "backend", "answer", "protocol", "k_sim", "status", "reason", "wall_s", "n_links"]
+    out = results[[c for c in cols if c in results.columns]].copy()
     out["k_ref"] = out.trial.map(ref)
     out["rel_to_ref"] = out.k_sim / out.k_ref - 1.0
     return out.reset_index(drop=True)
@@ -133,7 +134,7 @@ def run_agreement(trials: list, backends: list[str], protocol: object, out: Path
 
     if REFERENCE not in backends:
         backends = [*backends, REFERENCE]
-    fields = field_stage(trials)
+    fields = field_stage(trials, protocol.fit_window_mm)
     outcome = run_jobs(make_jobs(trials, backends, protocol, ModelConfig(), fields), out, executor, fields=fields,
                        **run_kw)
     bpath = Path(baseline) if baseline else baseline_path(protocol.name)

@@ -155,3 +155,44 @@ def bench_runner(n_jobs: int = 1000, workers: int = 2) -> pd.DataFrame:
     print(f"job runner: {n_jobs} Pinocchio jobs (20 steps each), {workers} workers, store and exports included")
     print(df.to_string(float_format=lambda v: f"{v:.3g}"))
     return df
+
+
+_MEMORY_PROBE = """
+import resource, sys, warnings
+warnings.simplefilter("ignore")
+from canebench.data.dataset import bundled_dataset, load_dataset
+from canebench.model.chain import build_chain
+from canebench.model.config import ModelConfig
+from canebench.backends.pinocchio_backend import PinocchioStatic
+t = load_dataset(bundled_dataset(), "b1c1t1")[0]
+ch = build_chain(t.cane, t.push_id, ModelConfig(segments=int(sys.argv[1]), discretization="uniform"))
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+k = PinocchioStatic(ch).linear_stiffness()
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(before / 1024, after / 1024, k)
+"""
+
+
+def bench_memory(links: tuple[int, ...] = (20, 160, 320)) -> pd.DataFrame:
+    """Peak memory of Pinocchio's linear stiffness against link count, each in a fresh process.
+
+    Prints the peak resident set (MB) after building the chain and after the
+    linear stiffness, and the growth over the 20-link case measured the same way.
+    """
+    import subprocess
+    import sys
+
+    rows = []
+    for n in links:
+        r = subprocess.run([sys.executable, "-c", _MEMORY_PROBE, str(n)], capture_output=True, text=True,
+                           timeout=600)
+        if r.returncode != 0:
+            raise RuntimeError(r.stderr[-2000:])
+        before, after, k = (float(v) for v in r.stdout.split()[-3:])
+        rows.append({"links": n, "dofs": 2 * n, "peak_mb_chain": before, "peak_mb_linear_stiffness": after,
+                     "k_linear_n_per_m": k})
+    df = pd.DataFrame(rows).set_index("links")
+    df["growth_vs_first"] = df.peak_mb_linear_stiffness / df.peak_mb_linear_stiffness.iloc[0]
+    print("Pinocchio linear stiffness: peak resident memory (MB), fresh process per size")
+    print(df.to_string(float_format=lambda v: f"{v:.4g}"))
+    return df

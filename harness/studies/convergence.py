@@ -3,7 +3,14 @@ stiffness converges (or not) to the beam's with segment count and formula.
 
 All in small deflection with gravity off, where closed forms exist: the
 chain's linear stiffness 1/(u^T J K^-1 J^T u) (Pinocchio) against the rod's
-F/d at a 1e-7 m push.
+(F(d) - F(-d)) / 2d at d = 1e-5 m.
+
+The beam's own mesh convergence on every push point (:func:`beam_mesh_convergence`):
+the beam as the runs build it (mesh doubled until its linear stiffness changes
+by less than 1e-4) against the same rod at twice that mesh, and against an
+independent small-deflection solution of the same continuum
+(:func:`continuum_stiffness`: Castigliano's integral over the polyline by
+Gauss-Legendre quadrature, no shooting).
 """
 
 from __future__ import annotations
@@ -21,6 +28,8 @@ from ..model.config import ModelConfig
 from ..backends.rod import Rod, RodSpec
 
 SEGMENTS = (3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30, 40)
+#: the beam's mesh is accepted when its linear stiffness is within this of the mesh twice as fine
+BEAM_RTOL = 1e-4
 FORMULAS = ("paper", "end_angle", "dual_length")
 DISCRETIZATIONS = ("greedy", "uniform")
 
@@ -65,6 +74,80 @@ def closed_form_ratio(formula: str, n: int) -> float:
     return float("nan")
 
 
+def continuum_stiffness(chain, gauss_points: int = 10) -> float:
+    """Small-deflection stiffness (N/m) of the chain's continuum, independently
+    of the rod solver: Castigliano's theorem on the rest geometry.
+
+    A unit force along u at the probe point r_p puts the moment
+    m(s) = (r_p - r(s)) x u on the section at s < s_p; the probe's deflection
+    along u is int_0^{s_p} m . C^-1 m ds with C^-1 = (1/EI)(I + nu t0 t0^T)
+    (bending 1/EI, torsion 1/GJ = (1 + nu)/EI). The rest geometry is the
+    smoothed polyline (r linear and t0 constant per segment) and EI(s) the
+    fitted diameter line (floored), so the integrand is smooth on each piece
+    between vertices, the probe and the diameter floor; Gauss-Legendre with
+    ``gauss_points`` per piece integrates it to rounding. Gravity plays no
+    part (as in the rod's linear stiffness).
+    """
+    g = chain.rod
+    sp = float(chain.meta["s_push"])
+    u = np.asarray(chain.direction, float) / np.linalg.norm(chain.direction)
+    P, S = np.asarray(g.points, float), np.asarray(g.s, float)
+    rp = np.array([np.interp(sp, S, P[:, k]) for k in range(3)])
+    cuts = [S[(S > 0) & (S < sp)], [0.0, sp]]
+    if g.slope != 0:  # where the diameter line meets its floor
+        cuts.append([g.s_centroid + (g.min_diameter - g.d_centroid) / g.slope])
+    br = np.unique(np.concatenate(cuts))
+    br = br[(br >= 0) & (br <= sp)]
+    a, b = br[:-1], br[1:]
+    xg, wg = np.polynomial.legendre.leggauss(gauss_points)
+    s = (a[:, None] + (xg[None] + 1) / 2 * (b - a)[:, None]).ravel()
+    w = (wg[None] * ((b - a) / 2)[:, None]).ravel()
+    seg = np.clip(np.searchsorted(S, 0.5 * (a + b), side="right") - 1, 0, len(S) - 2)
+    t = np.diff(P, axis=0)[seg]
+    t = np.repeat(t / np.linalg.norm(t, axis=1, keepdims=True), gauss_points, axis=0)
+    r = np.column_stack([np.interp(s, S, P[:, k]) for k in range(3)])
+    m = np.cross(rp - r, u)
+    ei = g.modulus * np.pi * g.diameter(s) ** 4 / 64.0
+    compliance = w @ (((m * m).sum(axis=1) + g.poisson_ratio * (t * m).sum(axis=1) ** 2) / ei)
+    return float(1.0 / compliance)
+
+
+def beam_mesh_convergence(cases: list[tuple[str, CaneDescription, str]], base: ModelConfig | None = None,
+                          rtol: float = BEAM_RTOL, progress=None) -> pd.DataFrame:
+    """Per push point: the beam as the runs build it against itself on a mesh
+    twice as fine, and against :func:`continuum_stiffness`.
+
+    Columns: ``elements`` (the accepted mesh), ``refinements`` (doublings from
+    the configured start), ``k_beam`` (its linear stiffness), ``k_refined`` (the
+    same rod at 2 x ``elements``, solved here again), ``rel_error`` =
+    |k_beam / k_refined - 1| and ``pass`` (<= ``rtol``), ``k_continuum`` and
+    ``rel_error_continuum``, and ``rest_offset_m``: the distance of the rod's
+    rest probe point from the smoothed centreline's point at ``s_push`` (zero
+    to rounding by construction).
+    """
+    from canebench.backends.beam_backend import BeamStatic
+
+    base = (base or ModelConfig()).replace(gravity=0.0)
+    rows = []
+    for i, (tid, cane, pid) in enumerate(cases):
+        chain = build_chain(cane, pid, base)
+        beam = BeamStatic(chain, rtol=rtol)
+        k = beam.linear_stiffness()
+        k_ref = beam.rod.refined().linear_stiffness()
+        k_cont = continuum_stiffness(chain)
+        g = chain.rod
+        on_curve = np.array([np.interp(chain.meta["s_push"], g.s, g.points[:, j]) for j in range(3)])
+        err = abs(k / k_ref - 1)
+        rows.append({"trial": tid, "elements": beam.extras["beam_elements"],
+                     "refinements": len(beam.mesh_history) - 2, "k_beam": k, "k_refined": k_ref,
+                     "rel_error": err, "pass": bool(err <= rtol), "beam_rel_error": beam.extras["beam_rel_error"],
+                     "k_continuum": k_cont, "rel_error_continuum": abs(k / k_cont - 1),
+                     "rest_offset_m": float(np.linalg.norm(beam.rod.p0 - on_curve))})
+        if progress:
+            progress(i + 1, len(cases), tid)
+    return pd.DataFrame(rows)
+
+
 def chain_convergence(cases: list[tuple[str, CaneDescription, str]], segments=SEGMENTS, formulas=FORMULAS,
                       discretizations=DISCRETIZATIONS, base: ModelConfig | None = None,
                       progress=None) -> pd.DataFrame:
@@ -78,9 +161,9 @@ def chain_convergence(cases: list[tuple[str, CaneDescription, str]], segments=SE
     base = (base or ModelConfig()).replace(gravity=0.0)
     rows = []
     for i, (tid, cane, pid) in enumerate(cases):
-        k_beam = BeamStatic(build_chain(cane, pid, base), n_elements=96).linear_stiffness()
-        k_beam_rigid_twist = BeamStatic(build_chain(cane, pid, base.replace(poisson_ratio=-0.99)),
-                                        n_elements=96).linear_stiffness()
+        # the beam as the runs build it: mesh refined until converged to 1e-4
+        k_beam = BeamStatic(build_chain(cane, pid, base)).linear_stiffness()
+        k_beam_rigid_twist = BeamStatic(build_chain(cane, pid, base.replace(poisson_ratio=-0.99))).linear_stiffness()
         for disc in discretizations:
             for formula in formulas:
                 for n in segments:
@@ -105,6 +188,8 @@ class ConvergenceResult:
     summary: pd.DataFrame
     exceedances: pd.DataFrame
     rod_order: float
+    beam_mesh: pd.DataFrame | None = None  # per push point: beam vs its own mesh twice as fine (beam_mesh.csv)
+    beam_mesh_summary: str = ""  # one line: how many push points pass, the worst
 
     def to_df(self) -> pd.DataFrame:
         return self.chains
@@ -113,7 +198,7 @@ class ConvergenceResult:
 def converge(out: Path, trials: str | None = None, segments: tuple[int, ...] = SEGMENTS,
              progress: Callable[[int, int, str], None] | None = None) -> ConvergenceResult:
     """Run the convergence study on the two straight cantilevers and the bundled canes; write CSVs and figures."""
-    from canebench.reports.convergence import chain_plot, exceedances, rod_plot, summary
+    from canebench.reports.convergence import beam_mesh_summary, chain_plot, exceedances, rod_plot, summary
 
     from ..data.dataset import bundled_dataset, load_dataset
 
@@ -123,11 +208,14 @@ def converge(out: Path, trials: str | None = None, segments: tuple[int, ...] = S
     order = -float(np.polyfit(np.log(rod.elements[:-2]), np.log(rod.rel_error[:-2]), 1)[0])
     cases = [("uniform-cantilever", straight_cantilever(False), "tip"),
              ("tapered-cantilever", straight_cantilever(True), "tip")]
-    cases += [(t.id, t.cane, t.push_id) for t in load_dataset(bundled_dataset(), trials)]
+    trial_cases = [(t.id, t.cane, t.push_id) for t in load_dataset(bundled_dataset(), trials)]
+    mesh = beam_mesh_convergence(trial_cases)
+    mesh.to_csv(out / "beam_mesh.csv", index=False)
+    cases += trial_cases
     df = chain_convergence(cases, segments=segments, progress=progress)
     df.to_csv(out / "convergence.csv", index=False)
     chain_plot(df, out / "chain_convergence.png")
     rod_plot(rod, out / "rod_convergence.png")
     summ = summary(df)
     summ.to_csv(out / "convergence_summary.csv", index=False)
-    return ConvergenceResult(rod, df, summ, exceedances(df), order)
+    return ConvergenceResult(rod, df, summ, exceedances(df), order, mesh, beam_mesh_summary(mesh))
