@@ -45,6 +45,8 @@ class Backend(ABC):
 
     name: ClassVar[str] = ""
     kind: ClassVar[str] = ""
+    #: True if ``build`` compiles the optional third (twist) joint of each link
+    supports_twist: ClassVar[bool] = False
     tags: ClassVar[tuple[str, ...]] = ()
     engine_module: ClassVar[str] = ""
 

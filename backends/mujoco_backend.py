@@ -50,9 +50,12 @@ def chain_to_mjcf(chain: Chain, dt: float, integrator: str, native_pid: bool, ga
         ind = "  " * (depth + 2)
         l, r = chain.lengths[j], chain.diameters[j] / 2
         lines.append(f'{ind}<body name="link{j}" pos="{_f(p)}" quat="{_f(_quat(R))}">')
-        for ax, name in (("1 0 0", "x"), ("0 1 0", "y")):
+        axes = [("1 0 0", "x", chain.stiffness[j]), ("0 1 0", "y", chain.stiffness[j])]
+        if chain.twist_stiffness is not None:
+            axes.append(("0 0 1", "z", chain.twist_stiffness[j]))
+        for ax, name, k in axes:
             lines.append(f'{ind}  <joint name="j{j}{name}" type="hinge" axis="{ax}" '
-                         f'stiffness="{_f(chain.stiffness[j])}" damping="{_f(chain.damping)}" springref="0"/>')
+                         f'stiffness="{_f(k)}" damping="{_f(chain.damping)}" springref="0"/>')
         lines.append(f'{ind}  <inertial pos="0 0 {_f(l / 2)}" mass="{_f(chain.masses[j])}" '
                      f'diaginertia="{_f(chain.inertias[j])}"/>')
         lines.append(f'{ind}  <geom type="capsule" fromto="0 0 0 0 0 {_f(l)}" size="{_f(r)}" '
@@ -134,6 +137,7 @@ class MujocoBackend(DynamicBackend):
     name = "mujoco"
     tags = ("dynamic", "implicit-springs", "native-pid")
     engine_module = "mujoco"
+    supports_twist = True
 
     def _mode(self, proto: Protocol) -> tuple[bool, str]:
         native = proto.controller == "engine"

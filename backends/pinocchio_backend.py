@@ -30,21 +30,24 @@ class ConvergenceError(RuntimeError):
 
 
 def chain_to_pinocchio(chain: Chain) -> tuple[pin.Model, int]:
-    """Pinocchio model (RX then RY joint per link) and the probe frame id."""
+    """Pinocchio model (RX then RY, and RZ with the twist joint, per link) and the probe frame id."""
     model = pin.Model()
     model.name = "cane"
     parent = 0
     push_joint = 0
+    kinds = [pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ][: chain.joints_per_link]
     for j in range(chain.n_links):
         R, p = chain.relative_pose(j)
-        jx = model.addJoint(parent, pin.JointModelRX(), pin.SE3(R, p), f"j{j}x")
-        jy = model.addJoint(jx, pin.JointModelRY(), pin.SE3.Identity(), f"j{j}y")
+        last = parent
+        for k, kind in enumerate(kinds):
+            pose = pin.SE3(R, p) if k == 0 else pin.SE3.Identity()
+            last = model.addJoint(last, kind(), pose, f"j{j}{'xyz'[k]}")
         inertia = pin.Inertia(float(chain.masses[j]), np.array([0.0, 0.0, chain.lengths[j] / 2]),
                               np.diag(chain.inertias[j]))
-        model.appendBodyToJoint(jy, inertia, pin.SE3.Identity())
+        model.appendBodyToJoint(last, inertia, pin.SE3.Identity())
         if j == chain.push_link:
-            push_joint = jy
-        parent = jy
+            push_joint = last
+        parent = last
     model.gravity.linear = np.asarray(chain.gravity, float)
     placement = pin.SE3(np.eye(3), chain.local(chain.push_link, chain.push_point))
     fid = model.addFrame(pin.Frame("push", push_joint, placement, pin.FrameType.OP_FRAME))
@@ -52,17 +55,17 @@ def chain_to_pinocchio(chain: Chain) -> tuple[pin.Model, int]:
 
 
 def rest_probe_jacobian(chain: Chain) -> np.ndarray:
-    """u . dp/dq at rest, one entry per joint (x0, y0, x1, y1, ...): (a_i x (p - o_i)) . u."""
+    """u . dp/dq at rest, one entry per joint (x0, y0, (z0,) x1, ...): (a_i x (p - o_i)) . u."""
     axes = chain.joint_axes_world()
-    origins = np.repeat(chain.nodes[:-1], 2, axis=0)
+    origins = np.repeat(chain.nodes[:-1], chain.joints_per_link, axis=0)
     Ju = np.cross(axes, chain.push_point[None, :] - origins) @ np.asarray(chain.direction, float)
-    Ju[2 * (chain.push_link + 1):] = 0.0  # joints beyond the probe's link do not move it
+    Ju[chain.joints_per_link * (chain.push_link + 1):] = 0.0  # joints beyond the probe's link do not move it
     return Ju
 
 
 def rest_linear_stiffness(chain: Chain) -> float:
     Ju = rest_probe_jacobian(chain)
-    return float(1.0 / (Ju @ (Ju / np.repeat(chain.stiffness, 2))))
+    return float(1.0 / (Ju @ (Ju / chain.joint_stiffness_vector())))
 
 
 class PinocchioStatic(StaticModel):
@@ -71,11 +74,12 @@ class PinocchioStatic(StaticModel):
         self.model, self.fid = chain_to_pinocchio(chain)
         self._data = None  # created on first solve: see `data`
         nv = self.model.nv
-        self.K = np.repeat(chain.stiffness, 2)
+        self.K = chain.joint_stiffness_vector()
         self.u = np.asarray(chain.direction, float)
         self.p0 = chain.push_point.copy()
-        # joints that carry the probe point: those up to the push link's RY
-        self.n_act = 2 * (chain.push_link + 1)
+        # joints that carry the probe point: those up to the push link's last joint
+        self.n_act = chain.joints_per_link * (chain.push_link + 1)
+        self.axis_index = [k for _, k in chain.joint_layout()]
         self.q = np.zeros(nv)
         self.F = 0.0
         self.tol_force = tol_force
@@ -111,7 +115,7 @@ class PinocchioStatic(StaticModel):
         o = np.empty((n, 3))
         for i in range(n):
             M = self.data.oMi[i + 1]
-            a[i] = M.rotation[:, i % 2]  # RX: local x, RY: local y
+            a[i] = M.rotation[:, self.axis_index[i]]  # RX: local x, RY: local y, RZ: local z
             o[i] = M.translation
         return a, o
 
@@ -172,6 +176,7 @@ class PinocchioBackend(StaticBackend):
     name = "pinocchio"
     tags = ("static", "reference", "exact")
     engine_module = "pinocchio"
+    supports_twist = True
 
     def settings(self, proto: Protocol) -> dict[str, Any]:
         return {

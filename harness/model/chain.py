@@ -66,7 +66,12 @@ class Chain:
     inertias : (n, 3) array
         Principal moments about the centre of mass in the link frame.
     stiffness : (n,) array
-        Torsional stiffness (N m/rad) of both joints preceding each link.
+        Torsional stiffness (N m/rad) of both bending joints preceding each link.
+    twist_stiffness : (n,) array or None
+        With the ``twist_joint`` model option, a third joint per link about
+        the link's own axis (z), after the two bending joints, with this
+        stiffness (from GJ = EI / (1 + nu) on the same formula); ``None``: the
+        paper's two-joint chain, rigid in torsion.
     damping : float
         Joint damping (N m s/rad), the same for every joint.
     push_link : int
@@ -95,14 +100,29 @@ class Chain:
     modulus: float
     meta: dict[str, Any] = field(default_factory=dict)
     rod: RodGeometry | None = None
+    twist_stiffness: np.ndarray | None = None
 
     @property
     def n_links(self) -> int:
         return len(self.lengths)
 
     @property
+    def joints_per_link(self) -> int:
+        return 2 if self.twist_stiffness is None else 3
+
+    @property
     def n_dof(self) -> int:
-        return 2 * self.n_links
+        return self.joints_per_link * self.n_links
+
+    def joint_layout(self) -> list[tuple[int, int]]:
+        """(link, local axis index) of every joint in chain order: x, y (, z) per link."""
+        return [(j, k) for j in range(self.n_links) for k in range(self.joints_per_link)]
+
+    def joint_stiffness_vector(self) -> np.ndarray:
+        """Spring stiffness of every joint in chain order (N m/rad)."""
+        if self.twist_stiffness is None:
+            return np.repeat(self.stiffness, 2)
+        return np.column_stack([self.stiffness, self.stiffness, self.twist_stiffness]).ravel()
 
     def com(self, j: int) -> np.ndarray:
         """Centre of mass of link ``j`` (world, rest)."""
@@ -120,8 +140,8 @@ class Chain:
         return rp.T @ self.frames[j], rp.T @ (self.nodes[j] - self.nodes[j - 1])
 
     def joint_axes_world(self) -> np.ndarray:
-        """(2n, 3) rest-configuration joint axes in world, in joint order."""
-        return np.stack([self.frames[j][:, k] for j in range(self.n_links) for k in (0, 1)])
+        """(n_dof, 3) rest-configuration joint axes in world, in joint order."""
+        return np.stack([self.frames[j][:, k] for j, k in self.joint_layout()])
 
     def fingerprint(self) -> str:
         """Short hash of everything the physics depends on."""
@@ -129,6 +149,8 @@ class Chain:
         for a in (self.nodes, self.frames, self.lengths, self.diameters, self.masses,
                   self.inertias, self.stiffness, self.push_point, self.direction, self.gravity):
             h.update(np.ascontiguousarray(np.round(a, 12)).tobytes())
+        if self.twist_stiffness is not None:
+            h.update(np.ascontiguousarray(np.round(self.twist_stiffness, 12)).tobytes())
         h.update(json.dumps([self.damping, self.push_link]).encode())
         return h.hexdigest()[:12]
 
@@ -241,7 +263,13 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
     ctx = StiffnessContext(nodes_s, lambda s: rod.modulus * np.pi * rod.diameter(s) ** 4 / 64.0)
     chain = assemble_chain(nodes, diam, E, rho, damping, config.stiffness_formula, link, point, u,
                            config.gravity, meta, src, ctx)
-    return dataclasses.replace(chain, rod=rod)
+    twist = None
+    if config.twist_joint:
+        # GJ = E (2I) / (2 (1 + nu)) = EI / (1 + nu): the beam reference's torsion, on the same formula
+        gj = lambda s: rod.modulus * np.pi * rod.diameter(s) ** 4 / 64.0 / (1.0 + rod.poisson_ratio)  # noqa: E731
+        twist = joint_stiffness(config.stiffness_formula, chain.modulus * np.pi * diam**4 / 64.0
+                                / (1.0 + config.poisson_ratio), chain.lengths, StiffnessContext(nodes_s, gj))
+    return dataclasses.replace(chain, rod=rod, twist_stiffness=twist)
 
 
 def assemble_chain(nodes: np.ndarray, diameters: np.ndarray, modulus: float, density: float, damping: float,

@@ -63,6 +63,11 @@ class ModelConfig:
         have no twist joint). 0.3 is a typical value for green wood.
     beam_elements : int
         RK4 elements of the beam reference (its mesh-refinement parameter).
+    twist_joint : bool
+        Add a third joint per link about the link's axis (torsion, stiffness
+        from GJ = EI / (1 + nu) on the dual segment). Off in the paper; on, the
+        beam-consistent chain converges to the beam with torsion (nu =
+        ``poisson_ratio``) instead of to a torsion-rigid rod.
     effects : tuple of str
         Names of extra physical effects (pluggable; empty reproduces the paper).
     """
@@ -84,6 +89,7 @@ class ModelConfig:
     min_diameter_m: float = 1.0e-3
     poisson_ratio: float = 0.3
     beam_elements: int = 48
+    twist_joint: bool = False
     effects: tuple[str, ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:

@@ -169,6 +169,12 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
 def run_probe(backend: Any, chain: Chain, proto: Protocol, n_steps: int) -> ProbeTrace:
     """Build ``chain`` in ``backend`` and probe it for ``n_steps`` samples."""
     t0 = time.perf_counter()
+    if chain.twist_stiffness is not None and not getattr(backend, "supports_twist", False):
+        tr = ProbeTrace()
+        tr.fail(f"backend {getattr(backend, 'name', type(backend).__name__)!r} does not compile the twist joint "
+                "(model option twist_joint): it would probe a different chain")
+        tr.settings = backend.settings(proto)
+        return tr
     try:
         built = backend.build(chain) if backend.kind == "static" else backend.build(chain, proto)
         # a dynamic backend may answer a protocol with a static model (a quasi-static scheme)
