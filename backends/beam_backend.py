@@ -16,7 +16,9 @@ Trustworthy by construction:
   moment-matched coefficients, so the rest probe point is the centreline's
   point at ``s_push`` at every mesh (no spline through the vertices: a
   cubic spline overshoots at the hairpins some digitized canes have).
-* Mesh. :class:`BeamStatic` starts at ``beam_elements`` (config, 48) and
+* Mesh. :class:`BeamStatic` starts at ``beam_elements`` (config, 48; plus a
+  node at each vertex where the centreline turns by more than 10 degrees,
+  ``Rod.KINK_NODE_DEG``, so 48 to 52 elements on the bundled canes) and
   doubles the mesh (every element halved) until the small-deflection
   stiffness changes by at most ``rtol`` = 1e-4 between successive meshes;
   the sweep then runs on the coarser of the last two (whose error the

@@ -45,10 +45,10 @@ an element still converges, but irregularly (about third order on average,
 the error depending on where in the element the kink falls), while between
 such nodes the coefficients vary gently and the error falls cleanly at
 fourth order, as the mesh-doubling error estimate of the beam backend
-assumes (measured on the bundled canes against a quadrature of the
-polyline's small-deflection compliance: 2e-5 at 24 elements, 1e-6 at 48,
-8e-8 at 96). A smooth rest shape samples t0 at the stages instead (the
-classical RK4).
+assumes (the largest linear-stiffness error over the 54 bundled push points,
+against a quadrature of the polyline's small-deflection compliance: 3e-4
+at 12 elements, 2e-5 at 24, 1.1e-6 at 48, 8e-8 at 96). A smooth rest shape
+samples t0 at the stages instead (the classical RK4).
 
 Speed. A shot is 4 x 48 evaluations of a right-hand side on a 13-vector, so
 its cost is interpreter overhead, not arithmetic: numpy costs about a
@@ -69,8 +69,10 @@ plain Newton solve, so the solve strategy changes the cost, not the answer
 Two solves: :meth:`Rod.solve_force` (force given; unknown m(0)) and
 :meth:`Rod.solve_displacement` (displacement of the probe point along u
 given; unknowns m(0) and F), the latter being the probe protocol's step.
-:meth:`Rod.refined` gives the same rod on a mesh with every element halved,
-for mesh-convergence checks.
+:meth:`Rod.linear_stiffness` is the small-deflection stiffness without the
+weight (a central difference of two force-controlled solves, ~1e-10 of
+solver noise), and :meth:`Rod.refined` the same rod on a mesh with every
+element halved, for mesh-convergence checks.
 """
 
 from __future__ import annotations
@@ -273,7 +275,8 @@ def _polyline_stages(spec: RodSpec, mesh: Array) -> tuple[Array, Array, Array]:
     xg, wg = np.polynomial.legendre.leggauss(5)
     sq = c0[:, None] + (xg[None] + 1) / 2 * (c1 - c0)[:, None]
     xq = 2 * (sq - a[:, None]) / he[:, None] - 1
-    f = spec.nu / np.asarray(spec.ei(sq.ravel()), float).reshape(sq.shape) * (wg[None] * ((c1 - c0) / (2 * he))[:, None])
+    wq = wg[None] * ((c1 - c0) / (2 * he))[:, None]  # Gauss weights over a piece, divided by h
+    f = spec.nu / np.asarray(spec.ei(sq.ravel()), float).reshape(sq.shape) * wq
     tt = np.stack([t[:, i] * t[:, j] for i, j in _SYM], axis=1)  # (pieces, 6)
     MB = np.zeros((3, N, 6))
     for k in range(3):
@@ -385,6 +388,7 @@ class Rod:
         # i.e. displacement control); reused as a chord Jacobian by the next solve
         self._jacobian: dict[bool, Array] = {}
         self._n_shots = 0
+        self._last_shot: tuple[list[float], float, _Shot] | None = None  # (x, F, shot) of the last residual
         # rest state: integrate the unloaded rod once (Q = I, m = n = 0 except weight is off)
         self.rest = self._integrate(np.zeros((1, 3)), np.zeros(1), weightless=True)
         self.p0 = self.rest["r_probe"][0]
@@ -502,6 +506,7 @@ class Rod:
         control, the probe displacement along u minus ``d``; one shot."""
         F = x[3] if unknown_F else F_fixed
         shot = self._shoot(x[:3], F)
+        self._last_shot = (x.tolist(), float(F), shot)
         if not unknown_F:
             return np.array(shot.m_end)
         disp = sum((a - b) * c for a, b, c in zip(shot.r_probe, self.p0.tolist(), self._u)) - d
@@ -679,7 +684,8 @@ class Rod:
             x = self.rigid_guess(P)
             for F in (P, -P):
                 x = self._newton(x, False, F, 0.0, 30)
-                r = self._shoot(x, F).r_probe
+                last = self._last_shot  # the solve's last shot, if it was at x
+                r = (last[2] if last and last[0] == x.tolist() and last[1] == F else self._shoot(x, F)).r_probe
                 delta.append(sum((a - b) * c for a, b, c in zip(r, p0, self._u)))
                 x = -x  # the first guess at -P
             #: the force-control Jacobian of the linear problem (for :meth:`linear_stiffness` on a refined mesh)

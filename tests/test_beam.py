@@ -10,7 +10,9 @@ from canebench.model.config import ModelConfig
 from canebench.probe.driver import run_probe
 from canebench.probe.protocol import PROTOCOLS
 from canebench.registry import get_backend
-from canebench.studies.convergence import chain_convergence, closed_form_ratio, straight_cantilever
+from canebench.studies.convergence import (chain_convergence, closed_form_ratio, continuum_stiffness,
+                                           straight_cantilever)
+from canebench.backends.beam_backend import BeamStatic, MeshNotConverged
 
 
 def test_beam_backend_is_registered_and_probed_like_the_others(bundled_trials):
@@ -51,6 +53,47 @@ def test_dual_length_chain_within_1pc_of_beam_at_20_uniform_segments(bundled_tri
     assert abs(df.ratio.iloc[0] - 1) < 0.01
 
 
+@pytest.mark.parametrize("trial_id", ["b2c2t3", "b5c1t3", "b1c1t1"])  # two with hairpin folds
+def test_beam_mesh_converged_with_its_error_estimate(bundled_trials, trial_id):
+    """The beam's rest probe point is the smoothed centreline's at s_push, its
+    mesh is converged to 1e-4 against twice the mesh, the estimate is in
+    ``extras``, and the stiffness agrees with an independent small-deflection
+    solution (Castigliano's integral over the polyline, no shooting)."""
+    t = next(t for t in bundled_trials if t.id == trial_id)
+    chain = build_chain(t.cane, t.push_id)
+    m = BeamStatic(chain)
+    assert np.linalg.norm(m.rod.p0 - chain.push_point) < 1e-12
+    n, err = m.extras["beam_elements"], m.extras["beam_rel_error"]
+    assert n == len(m.rod.h) and 0 <= err <= 1e-4
+    k, k2 = m.linear_stiffness(), m.rod.refined().linear_stiffness()
+    assert err == pytest.approx(abs(k / k2 - 1), rel=1e-3, abs=1e-9)
+    assert k == pytest.approx(continuum_stiffness(chain), rel=1e-4)
+
+
+def test_beam_refines_until_the_stiffness_settles(bundled_trials):
+    t = next(t for t in bundled_trials if t.id == "b1c1t1")
+    chain = build_chain(t.cane, t.push_id)
+    m = BeamStatic(chain, rtol=1e-7)  # the default mesh is good to ~5e-7 here
+    sizes = [n for n, _ in m.mesh_history]
+    assert len(sizes) >= 3 and all(b == 2 * a for a, b in zip(sizes, sizes[1:]))
+    assert m.extras["beam_elements"] == sizes[-2] and m.extras["beam_rel_error"] <= 1e-7
+    ks = [k for _, k in m.mesh_history]
+    assert abs(ks[-1] / ks[-2] - 1) < abs(ks[1] / ks[0] - 1)
+
+
+def test_unconverged_beam_mesh_fails_the_trial_with_the_reason(bundled_trials):
+    import dataclasses
+
+    t = next(t for t in bundled_trials if t.id == "b1c1t1")
+    chain = build_chain(t.cane, t.push_id)
+    with pytest.raises(MeshNotConverged, match="cap of 200"):
+        BeamStatic(chain, rtol=1e-13, max_elements=200)
+    cfg = {**chain.meta["config"], "beam_rtol": 1e-13, "beam_max_elements": 200}
+    chain = dataclasses.replace(chain, meta={**chain.meta, "config": cfg})
+    tr = run_probe(get_backend("beam"), chain, PROTOCOLS["fast"], 3)
+    assert tr.status == "failed" and "beam mesh not converged" in tr.reason
+
+
 def test_converge_command_writes_study_and_report(tmp_path):
     out = tmp_path / "conv"
     assert main(["converge", "--trials", "b1c1t1,b2c2t2", "--segments", "5,10,20", "--out", str(out)]) == 0
@@ -59,4 +102,8 @@ def test_converge_command_writes_study_and_report(tmp_path):
     assert set(df.trial) == {"uniform-cantilever", "tapered-cantilever", "b1c1t1", "b2c2t2"}
     for f in ("chain_convergence.png", "rod_convergence.png", "convergence_summary.csv", "convergence.html"):
         assert (out / f).exists(), f
+    mesh = pd.read_csv(out / "beam_mesh.csv")
+    assert set(mesh.trial) == {"b1c1t1", "b2c2t2"} and mesh["pass"].all()
+    assert (mesh.rel_error <= 1e-4).all() and (mesh.rel_error_continuum <= 1e-4).all()
+    assert (mesh.rest_offset_m < 1e-12).all()
     assert "Chain against beam" in (out / "convergence.html").read_text()
