@@ -199,9 +199,12 @@ def _convergence_section(run_dir: Path) -> str:
     path = run_dir / "convergence.csv"
     if not path.exists():
         return ""
-    from canebench.reports.convergence import chain_plot, exceedances, rod_plot, summary
+    from canebench.reports.convergence import beam_mesh_html, chain_plot, exceedances, rod_plot, summary
 
     df = pd.read_csv(path)
+    mesh_html = ""
+    if (run_dir / "beam_mesh.csv").exists():
+        mesh_html = beam_mesh_html(pd.read_csv(run_dir / "beam_mesh.csv"))
     chain_plot(df, run_dir / "chain_convergence.png")
     rod_html = ""
     if (run_dir / "rod_convergence.csv").exists():
@@ -211,16 +214,24 @@ def _convergence_section(run_dir: Path) -> str:
                     + rod.to_html(index=False, float_format=lambda v: f"{v:.3e}"))
     summ = summary(df)
     exc = exceedances(df)
+    exc_twist = exceedances(df, "dual_length+twist") if (df.formula == "dual_length+twist").any() else None
     fmt = {"float_format": lambda v: f"{v:.4f}", "index": False}
+    twist_html = ""
+    if exc_twist is not None:
+        twist_html = ("<h3>The same with the twist joint (<code>--set twist_joint=true</code>)</h3>"
+                      + (exc_twist.to_html(**fmt) if len(exc_twist) else
+                         "<p>none: with a twist joint per link every bundled push point is within 1 % of the "
+                         "beam (with torsion, nu = 0.3) at 20 segments</p>"))
     return ("<h2>Chain against beam: convergence with segments</h2>"
             "<p>Small deflection, gravity off: the chain's linear stiffness (Pinocchio, J K^-1 J^T) over the "
             "beam's. The paper's K = 2EI/L converges to about twice the beam's stiffness; K = EI/L approaches it "
             "from below at first order; the beam-consistent dual-length formula converges at second order. The "
-            "chains have no twist joint, so they cannot follow the beam's torsional compliance.</p>"
+            "paper's chains have no twist joint, so they cannot follow the beam's torsional compliance; "
+            "<code>dual_length+twist</code> adds one per link (model option <code>twist_joint</code>).</p>"
             '<img src="chain_convergence.png">'
             f"<h3>Error against the beam at 10 and 20 segments</h3>{summ.to_html(**fmt)}"
             f"<h3>Dual-length chains more than 1 % from the beam at 20 segments, and why</h3>"
-            f"{exc.to_html(**fmt) if len(exc) else '<p>none</p>'}" + rod_html)
+            f"{exc.to_html(**fmt) if len(exc) else '<p>none</p>'}" + twist_html + mesh_html + rod_html)
 
 
 def summary_table(res: pd.DataFrame) -> pd.DataFrame:

@@ -14,7 +14,7 @@ import pandas as pd  # noqa: E402
 
 from canebench.studies.convergence import closed_form_ratio  # noqa: E402
 
-COLORS = {"paper": "tab:red", "end_angle": "tab:blue", "dual_length": "tab:green"}
+COLORS = {"paper": "tab:red", "end_angle": "tab:blue", "dual_length": "tab:green", "dual_length+twist": "tab:purple"}
 
 
 def _segment_axis(ax) -> None:
@@ -94,8 +94,8 @@ def summary(df: pd.DataFrame, segments=(10, 20)) -> pd.DataFrame:
 
 def exceedances(df: pd.DataFrame, formula: str = "dual_length", segments: int = 20, tol: float = 0.01) -> pd.DataFrame:
     """Trials where the chain misses the beam by more than ``tol``, with the
-    part of the gap the chain cannot close (it has no twist joint): the
-    beam's own stiffening when its torsion is made rigid."""
+    part of the gap a chain without twist joint cannot close: the beam's own
+    stiffening when its torsion is made rigid."""
     g = df[(df.formula == formula) & (df.segments == segments)].copy()
     g["error"] = g.ratio - 1
     g["beam torsion effect"] = g.k_beam_rigid_twist / g.k_beam - 1

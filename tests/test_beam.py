@@ -98,7 +98,7 @@ def test_converge_command_writes_study_and_report(tmp_path):
     out = tmp_path / "conv"
     assert main(["converge", "--trials", "b1c1t1,b2c2t2", "--segments", "5,10,20", "--out", str(out)]) == 0
     df = pd.read_csv(out / "convergence.csv")
-    assert set(df.formula) == {"paper", "end_angle", "dual_length"}
+    assert set(df.formula) == {"paper", "end_angle", "dual_length", "dual_length+twist"}
     assert set(df.trial) == {"uniform-cantilever", "tapered-cantilever", "b1c1t1", "b2c2t2"}
     for f in ("chain_convergence.png", "rod_convergence.png", "convergence_summary.csv", "convergence.html"):
         assert (out / f).exists(), f

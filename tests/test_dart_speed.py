@@ -28,8 +28,8 @@ def _chain(bundled_trials, tid: str) -> Chain:
 
 @pytest.fixture(scope="module")
 def tight(bundled_trials) -> Chain:
-    """b4c2t3: the bundled trial whose closed-loop limit is below 1 ms."""
-    return _chain(bundled_trials, "b4c2t3")
+    """b6c1t3: a bundled trial whose closed-loop limit (0.91 ms) is just below 1 ms."""
+    return _chain(bundled_trials, "b6c1t3")
 
 
 def test_closed_loop_limit_matches_the_measured_boundary(tight: Chain) -> None:
@@ -72,8 +72,9 @@ def test_probe_frame_reads_the_body_point(tight: Chain) -> None:
         sim.step(0.3)
     p = sim.body.getWorldTransform().multiply(sim.offset)
     v = sim.body.getLinearVelocity(sim.offset)
-    np.testing.assert_array_equal(sim.probe.getWorldTransform().translation(), p)
-    np.testing.assert_array_equal(sim.probe.getLinearVelocity(), v)
+    # the same point by two accessors: equal to the last bit or two of rounding
+    np.testing.assert_allclose(sim.probe.getWorldTransform().translation(), p, rtol=1e-14, atol=1e-16)
+    np.testing.assert_allclose(sim.probe.getLinearVelocity(), v, rtol=1e-14, atol=1e-16)
     x, xd = sim.read()
     assert x == pytest.approx(sim.u @ (p - sim.p0), rel=1e-12) and xd == pytest.approx(sim.u @ v, rel=1e-12)
 

@@ -84,7 +84,9 @@ def test_pybullet_at_25us_chatters_and_is_failed(bundled_trials):
         tr = probe_dynamic(sim, PROTOCOLS["paper"], 3)
     finally:
         sim.close()
-    assert tr.status == "failed" and ("chatter" in tr.reason or "unsettled" in tr.reason)
+    # caught by whichever check sees it first: the chatter check, or the probe
+    # flung millimetres past its setpoint (the per-sample tracking check)
+    assert tr.status == "failed" and any(w in tr.reason for w in ("chatter", "unsettled", "overshoot"))
     assert not tr.force  # nothing was reported as a sample
 
 

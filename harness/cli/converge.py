@@ -36,6 +36,9 @@ def main(a: argparse.Namespace) -> int:
     print(r.summary.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     print("\ndual-length chains more than 1 % from the beam at 20 segments (torsion: the chain has no twist joint):")
     print(r.exceedances.to_string(index=False, float_format=lambda v: f"{v:.4f}") if len(r.exceedances) else "  none")
+    ex = r.exceedances_twist
+    print("the same chains with the twist joint (--set twist_joint=true):")
+    print(ex.to_string(index=False, float_format=lambda v: f"{v:.4f}") if ex is not None and len(ex) else "  none")
     df = r.chains
     for f in ("paper", "end_angle", "dual_length"):
         g = df[(df.trial == "uniform-cantilever") & (df.formula == f) & (df.discretization == "uniform")]

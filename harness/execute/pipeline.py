@@ -181,6 +181,9 @@ def run_job(job: Job) -> JobResult:
         controller=tr.extras.get("controller", ""), dt=tr.extras.get("dt", math.nan),
         answer=tr.extras.get("answer", ""),
     )
+    for key in ("beam_elements", "beam_rel_error"):  # the beam reference's mesh and error estimate
+        if key in tr.extras:
+            row[key] = tr.extras[key]
     return JobResult(job.key, row, [float(x) for x in tr.displacement], [float(f) for f in tr.force])
 
 

@@ -127,6 +127,9 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     tmp_path = Path(tmp)
     try:
         write(tmp_path)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes 0600; an export is as readable as any new file
         os.replace(tmp_path, path)
     finally:
         tmp_path.unlink(missing_ok=True)

@@ -57,7 +57,8 @@ FORCE_LIMIT_GF = 1000.0
 RIG_FIT_THRESHOLD_GF = 20.0
 MIN_CONTACT_SAMPLES = 5
 MIN_R2 = 0.8
-ONSET_SEARCH_GF = 150.0  # hinge fitted over the record until the reading rises this much
+ONSET_SEARCH_GF = 150.0  # hinge fitted over the record until the reading rises this much...
+ONSET_LINE_SAMPLES = 3  # ...and this many samples more
 
 
 @dataclass
@@ -117,7 +118,9 @@ def extract_field_stiffness(trial: RigTrial, window_mm: float | None = None, n_b
     # hinge over the early record only: later curvature must not move the knee
     rise = f - np.minimum.accumulate(f)
     end = int(np.argmax(rise > ONSET_SEARCH_GF)) if np.any(rise > ONSET_SEARCH_GF) else len(f)
-    end = max(end, min(len(f), 8))
+    # the line part needs a few samples past the rise: a stiff cane passes 150 gf on its
+    # first contact sample, and a one-point line would let the knee slide into the flat part
+    end = max(min(len(f), end + ONSET_LINE_SAMPLES), min(len(f), 8))
     i0, level = _hinge_onset(x[:end], f[:end])
     if i0 < 2:
         flags.append("no pre-contact baseline: first reading taken as zero force")

@@ -62,7 +62,12 @@ class ModelConfig:
         nu for the beam reference's torsion, GJ = EI / (1 + nu) (the chains
         have no twist joint). 0.3 is a typical value for green wood.
     beam_elements : int
-        RK4 elements of the beam reference (its mesh-refinement parameter).
+        First mesh (RK4 elements) of the beam reference, doubled until converged.
+    beam_rtol : float
+        The beam's mesh is doubled until its small-deflection stiffness changes
+        by less than this between meshes (the error estimate in every beam row).
+    beam_max_elements : int
+        Most elements the beam may use; not converged by then fails the trial.
     twist_joint : bool
         Add a third joint per link about the link's axis (torsion, stiffness
         from GJ = EI / (1 + nu) on the dual segment). Off in the paper; on, the
@@ -89,6 +94,8 @@ class ModelConfig:
     min_diameter_m: float = 1.0e-3
     poisson_ratio: float = 0.3
     beam_elements: int = 48
+    beam_rtol: float = 1.0e-4
+    beam_max_elements: int = 3072
     twist_joint: bool = False
     effects: tuple[str, ...] = field(default_factory=tuple)
 
@@ -123,6 +130,10 @@ class ModelConfig:
             raise InputError(source, "discretization", f"must be 'greedy' or 'uniform', got {self.discretization!r}")
         if self.beam_elements < 2:
             raise InputError(source, "beam_elements", "must be >= 2")
+        if not (0 < self.beam_rtol < 0.1):
+            raise InputError(source, "beam_rtol", f"must be in (0, 0.1), got {self.beam_rtol!r}")
+        if self.beam_max_elements < self.beam_elements:
+            raise InputError(source, "beam_max_elements", "must be >= beam_elements")
         from .stiffness import FORMULAS  # late: the formulas module registers on import
 
         if self.stiffness_formula not in FORMULAS:

@@ -104,6 +104,7 @@ def probe_static(model: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
     except Exception as exc:  # a solver that does not converge fails the trial, not the run
         tr.fail(f"static solve failed at step {len(tr.force) + 1}: {type(exc).__name__}: {exc}")
     _check_range(tr, proto)
+    tr.extras.update(getattr(model, "extras", {}))  # e.g. the beam's mesh and its error estimate
     try:
         tr.extras["k_linear"] = float(model.linear_stiffness())
     except NotImplementedError:

@@ -30,7 +30,8 @@ from ..backends.rod import Rod, RodSpec
 SEGMENTS = (3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30, 40)
 #: the beam's mesh is accepted when its linear stiffness is within this of the mesh twice as fine
 BEAM_RTOL = 1e-4
-FORMULAS = ("paper", "end_angle", "dual_length")
+# "+twist": the same formula with the optional twist joint per link (model option twist_joint)
+FORMULAS = ("paper", "end_angle", "dual_length", "dual_length+twist")
 DISCRETIZATIONS = ("greedy", "uniform")
 
 
@@ -65,6 +66,7 @@ def straight_cantilever(tapered: bool, E: float = 4.57e9, L: float = 1.2, d0: fl
 
 def closed_form_ratio(formula: str, n: int) -> float:
     """reference-values sec. 5: chain/beam tip compliance of a uniform cantilever."""
+    formula = formula.removesuffix("+twist")  # a straight cantilever under an in-plane load does not twist
     if formula == "paper":
         return (n + 1) * (2 * n + 1) / (2 * 2 * n**2)
     if formula == "end_angle":
@@ -167,7 +169,8 @@ def chain_convergence(cases: list[tuple[str, CaneDescription, str]], segments=SE
         for disc in discretizations:
             for formula in formulas:
                 for n in segments:
-                    cfg = base.replace(segments=n, stiffness_formula=formula, discretization=disc)
+                    name, twist = (formula[: -len("+twist")], True) if formula.endswith("+twist") else (formula, False)
+                    cfg = base.replace(segments=n, stiffness_formula=name, discretization=disc, twist_joint=twist)
                     ch = build_chain(cane, pid, cfg)
                     k = PinocchioStatic(ch).linear_stiffness()
                     rows.append({"trial": tid, "cane": cane.id, "discretization": disc, "formula": formula,
@@ -190,6 +193,7 @@ class ConvergenceResult:
     rod_order: float
     beam_mesh: pd.DataFrame | None = None  # per push point: beam vs its own mesh twice as fine (beam_mesh.csv)
     beam_mesh_summary: str = ""  # one line: how many push points pass, the worst
+    exceedances_twist: pd.DataFrame | None = None  # the same with the twist joint (expected: none)
 
     def to_df(self) -> pd.DataFrame:
         return self.chains
@@ -218,4 +222,5 @@ def converge(out: Path, trials: str | None = None, segments: tuple[int, ...] = S
     rod_plot(rod, out / "rod_convergence.png")
     summ = summary(df)
     summ.to_csv(out / "convergence_summary.csv", index=False)
-    return ConvergenceResult(rod, df, summ, exceedances(df), order, mesh, beam_mesh_summary(mesh))
+    return ConvergenceResult(rod, df, summ, exceedances(df), order, mesh, beam_mesh_summary(mesh),
+                             exceedances(df, "dual_length+twist"))
