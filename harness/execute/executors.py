@@ -35,7 +35,7 @@ from typing import Any, Iterator
 from ..registry import Registry
 from .jobs import Job, JobResult
 from .pipeline import failed_result
-from .worker import execute, worker_main
+from .worker import execute, execute_many, worker_main
 
 DEFAULT_TIMEOUT_S = 600.0  # generous: a full 40 kHz MuJoCo trial takes about 15 s
 
@@ -211,9 +211,10 @@ class DaskExecutor(Executor):
 
     name = "dask"
 
-    def __init__(self, scheduler: str | None = None, workers: int | None = None) -> None:
+    def __init__(self, scheduler: str | None = None, workers: int | None = None, chunk: int | None = None) -> None:
         self.scheduler = scheduler
         self.n = max(1, workers or os.cpu_count() or 1)
+        self.chunk = chunk  # jobs per Dask task (None: sized from the job count)
 
     def describe(self) -> dict[str, Any]:
         return {"executor": self.name, "scheduler": self.scheduler or f"LocalCluster({self.n} workers)"}
@@ -234,11 +235,17 @@ class DaskExecutor(Executor):
                                        dashboard_address=None, silence_logs=40)
             client = Client(cluster, set_as_default=False)
         hard = (timeout_s + grace(timeout_s)) if timeout_s and timeout_s > 0 else None
-        futs: dict[Any, Job] = {}
+        futs: dict[Any, list[Job]] = {}
         try:
-            keys = [f"canebench-{job.key}-{i}" for i, job in enumerate(jobs)]
-            for f, job in zip(client.map(execute, jobs, [timeout_s] * len(jobs), key=keys, pure=False), jobs):
-                futs[f] = job
+            # Several jobs per task: a Dask task costs milliseconds of scheduling and
+            # serialization, about what a Pinocchio job costs to run. Chunks stay small
+            # enough (at least 8 per worker) to balance the load and report progress.
+            size = self.chunk or max(1, min(16, len(jobs) // (8 * self.n)))
+            chunks = [jobs[i:i + size] for i in range(0, len(jobs), size)]
+            keys = [f"canebench-{c[0].key}-{i}" for i, c in enumerate(chunks)]
+            for f, c in zip(client.map(execute_many, chunks, [timeout_s] * len(chunks), key=keys, pure=False),
+                            chunks):
+                futs[f] = c
             started: dict[Any, float] = {}
             pending = dict.fromkeys(futs)  # insertion-ordered set
             while pending:
@@ -252,26 +259,25 @@ class DaskExecutor(Executor):
                 ok = [f for f in batch if f.status == "finished"]
                 results = dict(zip(ok, client.gather(ok))) if ok else {}
                 for f in batch:
-                    job = futs[f]
                     if f in results:
-                        res = results[f]
+                        yield from zip(futs[f], results[f])
                     else:  # worker lost, unpicklable result...
                         exc = f.exception()
-                        res = failed_result(job, "failed", f"dask: {type(exc).__name__}: {exc}")
-                    yield job, res
+                        for job in futs[f]:
+                            yield job, failed_result(job, "failed", f"dask: {type(exc).__name__}: {exc}")
                 if hard is not None and pending and not batch:
-                    # a job's clock starts when the scheduler reports it processing
+                    # a chunk's clock starts when the scheduler reports it processing
                     now = time.monotonic()
                     processing = {k for keys in client.processing().values() for k in keys}
                     for f in list(pending):
                         if f.key in processing:
                             started.setdefault(f, now)
-                            if now - started[f] > hard:
+                            if now - started[f] > hard * len(futs[f]):
                                 pending.pop(f)
                                 f.cancel()
-                                yield futs[f], failed_result(futs[f], "timeout",
-                                                             f"timeout: no answer {hard:g} s after start (abandoned)",
-                                                             now - started[f])
+                                for job in futs[f]:
+                                    yield job, failed_result(job, "timeout", f"timeout: no answer {hard:g} s per "
+                                                             "job after start (abandoned)", now - started[f])
         finally:
             for f in futs:
                 if not f.done():

@@ -34,6 +34,11 @@ def execute(job: Job, timeout_s: float | None) -> JobResult:
                              time.perf_counter() - t0)
 
 
+def execute_many(jobs: list[Job], timeout_s: float | None) -> list[JobResult]:
+    """Several jobs in a row (a Dask task), each under its own time limit."""
+    return [execute(job, timeout_s) for job in jobs]
+
+
 def _watch_parent(lifeline: Any) -> None:
     try:
         lifeline.recv()  # the parent never sends: this returns only by EOF
