@@ -274,9 +274,33 @@ def _state_section(meta: dict) -> str:
             f'{html.escape(str(meta.get("resume", "")))}</p>')
 
 
+def _study_sections(run_dir: Path) -> str:
+    """Sections of the studies whose files are in the folder (rebuilt from those files)."""
+    parts = []
+    if (run_dir / "modulus_meta.json").exists():
+        from canebench.studies.modulus import modulus_section_html
+
+        parts.append(modulus_section_html(run_dir))
+    return "".join(parts)
+
+
 def build_report(run_dir: Path) -> Path:
-    """Write figures and ``report.html`` into ``run_dir``; return the page path."""
+    """Write figures and ``report.html`` into ``run_dir``; return the page path.
+
+    Every section is built from the folder's files: a run's results, and any
+    study's tables (a folder may hold only a study).
+    """
     run_dir = Path(run_dir)
+    if not (run_dir / "results.csv").exists():
+        studies = _study_sections(run_dir)
+        if studies:
+            page = run_dir / "report.html"
+            page.write_text("<!doctype html><html><head><meta charset='utf-8'><title>canebench report</title>"
+                            "<style>body{font-family:sans-serif;max-width:1200px;margin:auto} "
+                            "table{border-collapse:collapse;font-size:12px} td,th{border:1px solid #ccc;"
+                            "padding:2px 6px} img{max-width:100%}</style></head><body><h1>canebench report</h1>"
+                            f"{studies}</body></html>")
+            return page
     res = _read_table(run_dir / "results.csv", required=True)
     if "status" not in res.columns:  # written by an older or an aborted run: an empty table, not a crash
         from canebench.execute.pipeline import RESULT_COLUMNS
@@ -350,7 +374,7 @@ engines {html.escape(json.dumps(meta.get('engines', {})))}; canebench {html.esca
 {'<h2>Stiffness per trial</h2><img src="stiffness.png"><h2>Log-ratio error</h2><img src="log_ratio.png">' if scored
  else '<p><b>No scored trial</b>: no figure of stiffness against the field.</p>'}
 {'<h2>Force-displacement examples</h2><img src="traces.png">' if len(traces) and len(res) else ''}
-{comparison}{beam_section}{convergence_section}
+{comparison}{beam_section}{convergence_section}{_study_sections(run_dir)}
 <h2>Failed or unscored</h2>{failed.to_html(index=False) if len(failed) else '<p>none</p>'}
 <h2>Per trial</h2>{per_trial.to_html(index=False, float_format=lambda v: f'{v:.4g}')}
 <h2>Configuration</h2><pre>{html.escape(json.dumps({'model_config': meta.get('model_config'), 'protocol': meta.get('protocol'), 'backend_settings': settings}, indent=1))}</pre>

@@ -212,3 +212,25 @@ def test_straight_cane_assumption_in_every_output(field_dir, tmp_path):
                  "--out", str(out), "--quiet"]) == 0
     for f in ("results.csv", "field.csv"):
         assert pd.read_csv(out / f).assumptions.str.contains("straight vertical cane").all(), f
+
+
+def test_mujoco_log_lands_in_the_run_folder(tmp_path, monkeypatch):
+    # a floppy, undamped cane makes MuJoCo warn (bad acceleration) and write its log
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    out = tmp_path / "run"
+    code = main(["run", "--trials", "b1c1t1", "--backends", "mujoco", "--set", "modulus_pa=1e3", "--set",
+                 "damping=1e-9", "--out", str(out), "--no-report", "--quiet"])
+    assert code == 1  # every job failed, and said why
+    assert "BADQACC" in pd.read_csv(out / "results.csv").reason.iloc[0]
+    assert (out / "MUJOCO_LOG.TXT").exists() and not (cwd / "MUJOCO_LOG.TXT").exists()
+
+
+def test_quasi_static_answers_are_labelled(bundled_trials, capsys):
+    t = [t for t in bundled_trials if t.id == "b1c1t1"]
+    res = run_trials(t, ["pybullet", "mujoco", "pinocchio"], PROTOCOLS["fast"], ModelConfig(),
+                     executor=SerialExecutor()).results.set_index("backend")
+    assert res.answer.to_dict() == {"pybullet": "quasi-static", "mujoco": "dynamic", "pinocchio": "static"}
+    assert main(["backends"]) == 0
+    assert "fast: answer=quasi-static" in capsys.readouterr().out

@@ -6,9 +6,9 @@ import argparse
 import sys
 
 from ..errors import CanebenchError, InputWarning
-from . import agree, backends, bench, converge, generate, report, run
+from . import agree, backends, bench, converge, generate, report, run, study
 
-COMMANDS = (run, report, agree, converge, backends, generate, bench)
+COMMANDS = (run, report, agree, converge, study, backends, generate, bench)
 
 
 def build_parser() -> argparse.ArgumentParser:

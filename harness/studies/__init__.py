@@ -16,11 +16,14 @@ STUDIES: Registry[Callable] = Registry("study")
 def _register_builtin() -> None:
     from .agreement import run_agreement
     from .convergence import converge
+    from .modulus import modulus_study
 
     STUDIES.add("agreement", run_agreement, ("engines", "gate"),
                 "every trial on every chain engine against Pinocchio's exact statics; regression gate")
     STUDIES.add("convergence", converge, ("beam", "discretization"),
                 "beam convergence and chain/beam stiffness against segment count, per formula")
+    STUDIES.add("modulus", modulus_study, ("paper", "material"),
+                "three-point bending: flexural modulus by season, variety and age; Welch t-tests; distributions")
 
 
 _register_builtin()
