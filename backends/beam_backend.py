@@ -136,6 +136,8 @@ class BeamBackend(StaticBackend):
     name = "beam"
     tags = ("static", "reference", "continuum")
     engine_module = "scipy"
+    # not a chain: the rod always has torsion (GJ = EI / (1 + nu)), the reference a twist-jointed chain converges to
+    supports_twist = True
 
     @classmethod
     def engine_version(cls) -> str:

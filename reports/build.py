@@ -274,9 +274,22 @@ def _state_section(meta: dict) -> str:
             f'{html.escape(str(meta.get("resume", "")))}</p>')
 
 
+def _read_meta(run_dir: Path) -> dict:
+    """``run.json``, or a note that it is missing or unreadable (the tables still make a report)."""
+    p = run_dir / "run.json"
+    if not p.exists():
+        return {"assumptions": ["run.json missing: provenance unknown"]}
+    try:
+        return json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        return {"assumptions": [f"run.json unreadable ({exc}): provenance unknown"]}
+
+
 def _study_sections(run_dir: Path) -> str:
     """Sections of the studies whose files are in the folder (rebuilt from those files)."""
-    parts = []
+    from canebench.reports.paper import paper_sections
+
+    parts = [paper_sections(run_dir)]
     if (run_dir / "modulus_meta.json").exists():
         from canebench.studies.modulus import modulus_section_html
 
@@ -307,15 +320,18 @@ def build_report(run_dir: Path) -> Path:
 
         res = pd.DataFrame(columns=RESULT_COLUMNS)
     traces = _read_table(run_dir / "traces.csv")
-    meta = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").exists() else {}
-    scored = len(res) > 0 and bool((res.status == "ok").any())
+    meta = _read_meta(run_dir)
+    # a study's folder holds many configurations per trial: its own sections show them, the
+    # one-row-per-trial figures of a run do not apply
+    multi = "config_hash" in res.columns and res.config_hash.nunique() > 1
+    scored = len(res) > 0 and bool((res.status == "ok").any()) and not multi
     if scored:
         stiffness_plot(res, run_dir / "stiffness.png")
         log_ratio_plot(res, run_dir / "log_ratio.png")
-    if len(traces) and len(res):
+    if len(traces) and len(res) and not multi:
         traces_plot(traces, res, run_dir / "traces.png")
     comparison = ""
-    if len(res) and res.backend.nunique() > 1:
+    if len(res) and res.backend.nunique() > 1 and not multi:
         cmp_figs = comparison_plots(res, run_dir)
         from canebench.studies.agreement import REFERENCE, agreement_table, pairwise
 
@@ -351,7 +367,7 @@ def build_report(run_dir: Path) -> Path:
             f"<h3>Pairwise |ln(k_a/k_b)|</h3>{pairs.to_html(index=False, float_format=lambda v: f'{v:.2e}')}"
             + "".join(f'<h3>{p.stem.replace("_", " ")}</h3><img src="{p.name}">' for p in cmp_figs))
     summ = summary_table(res)
-    beam_section = _beam_section(res, run_dir)
+    beam_section = _beam_section(res, run_dir) if not multi else ""
     convergence_section = _convergence_section(run_dir)
     failed = res[res.status != "ok"][["trial", "backend", "status", "reason", "field_reason"]]
     banner = ""
@@ -372,8 +388,9 @@ engines {html.escape(json.dumps(meta.get('engines', {})))}; canebench {html.esca
 <h2>Assumptions</h2><ul>{assumptions or '<li>none recorded</li>'}</ul>
 <h2>Summary</h2>{summ.to_html(index=False, float_format=lambda v: f'{v:.4g}') if len(summ) else '<p>no results</p>'}
 {'<h2>Stiffness per trial</h2><img src="stiffness.png"><h2>Log-ratio error</h2><img src="log_ratio.png">' if scored
- else '<p><b>No scored trial</b>: no figure of stiffness against the field.</p>'}
-{'<h2>Force-displacement examples</h2><img src="traces.png">' if len(traces) and len(res) else ''}
+ else ('<p>Several model configurations per trial: see the study sections below.</p>' if multi else
+       '<p><b>No scored trial</b>: no figure of stiffness against the field.</p>')}
+{'<h2>Force-displacement examples</h2><img src="traces.png">' if len(traces) and len(res) and not multi else ''}
 {comparison}{beam_section}{convergence_section}{_study_sections(run_dir)}
 <h2>Failed or unscored</h2>{failed.to_html(index=False) if len(failed) else '<p>none</p>'}
 <h2>Per trial</h2>{per_trial.to_html(index=False, float_format=lambda v: f'{v:.4g}')}

@@ -86,8 +86,18 @@ def test_bundled_descriptions_load_and_are_labelled_synthetic(bundled_trials):
 
 
 def test_config_overrides_are_typed_and_validated():
-    c = ModelConfig().with_overrides({"modulus_pa": "3e9", "segments": "12", "effects": "a,b"})
-    assert c.modulus_pa == 3e9 and c.segments == 12 and c.effects == ("a", "b")
+    from canebench.model.effects import EFFECTS
+
+    EFFECTS.add("test_a", object())
+    EFFECTS.add("test_b", object())
+    try:
+        c = ModelConfig().with_overrides({"modulus_pa": "3e9", "segments": "12", "effects": "test_a,test_b"})
+        assert c.modulus_pa == 3e9 and c.segments == 12 and c.effects == ("test_a", "test_b")
+    finally:
+        EFFECTS.remove("test_a")
+        EFFECTS.remove("test_b")
+    with pytest.raises(InputError, match="effects"):
+        ModelConfig().with_overrides({"effects": "test_a"})
     assert ModelConfig().with_overrides({"segments": "none"}).segments is None
     with pytest.raises(InputError, match="diameter_factor"):
         ModelConfig().with_overrides({"diameter_factor": "1.5"})

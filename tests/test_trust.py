@@ -234,3 +234,101 @@ def test_quasi_static_answers_are_labelled(bundled_trials, capsys):
     assert res.answer.to_dict() == {"pybullet": "quasi-static", "mujoco": "dynamic", "pinocchio": "static"}
     assert main(["backends"]) == 0
     assert "fast: answer=quasi-static" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------- found in review
+
+
+def test_bad_rig_csvs_are_refused_before_simulation(dataset, tmp_path, capsys):
+    f = dataset / "trials" / "syn_bush1_cane1_trial1.csv"
+    for content, expect in ((bytes(range(256)) * 8, "not a text file|malformed"), (b"", "malformed|fewer"),
+                            (f.read_bytes().replace(b",-", b",1e400,-", 1), "")):
+        f.write_bytes(content)
+        code = main(["run", "--field", str(dataset), "--trials", "b1c1t1", "--backends", "pinocchio",
+                     "--out", str(tmp_path / "r"), "--no-report", "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and "syn_bush1_cane1_trial1.csv" in err, err
+        assert not (tmp_path / "r" / "results.csv").exists()
+    f.unlink()
+    assert main(["run", "--field", str(dataset), "--trials", "b1c1t1", "--backends", "pinocchio",
+                 "--out", str(tmp_path / "r"), "--quiet"]) == 2
+    assert "not found" in capsys.readouterr().err
+
+
+def test_rig_warnings_are_errors_under_strict(dataset, tmp_path):
+    f = dataset / "trials" / "syn_bush1_cane1_trial1.csv"
+    df = pd.read_csv(f)
+    df["Displacement (mm)"] = df["Displacement (mm)"] / 1000.0  # written in metres
+    df.to_csv(f, index=False)
+    with pytest.warns(InputWarning, match="metres"):
+        load_and_fit = run_trials(load_dataset(dataset, "b1c1t1"), ["pinocchio"], PROTOCOLS["fast"], ModelConfig(),
+                                  executor=SerialExecutor())
+    assert len(load_and_fit.results) == 1
+    assert main(["run", "--field", str(dataset), "--trials", "b1c1t1", "--backends", "pinocchio", "--strict",
+                 "--out", str(tmp_path / "r"), "--no-report", "--quiet"]) == 2
+
+
+def test_huge_integers_and_fractional_trial_numbers_are_named():
+    d = base_dict()
+    d["polyline"]["points"][3][2] = 10 ** 400
+    with pytest.raises(InputError, match=r"polyline.points\[3\]\[2\].*out of range"):
+        cane_from_dict(d, "b1c1.yaml")
+
+
+def test_fractional_trial_numbers_are_refused(dataset):
+    pp = dataset / "push_points.csv"
+    pp.write_text(pp.read_text().replace("\n1,1,2,", "\n1,1,1.5,", 1))
+    with pytest.raises(InputError, match="push_points.csv.*trial.*whole number"):
+        load_dataset(dataset)
+
+
+def test_extents_are_checked_on_the_smoothed_centreline():
+    d = base_dict("b2c2")
+    pts = np.array(d["polyline"]["points"])
+    raw_len = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+    d["calipers"][0] = {"s": raw_len - 1e-4, "diameter": 0.01}  # on the raw polyline, past the smoothed end
+    cane = None
+    try:
+        cane = cane_from_dict(d, "b2c2.yaml")
+    except InputError as exc:
+        assert "calipers[0].s" in str(exc)
+    if cane is not None:  # accepted at load: then the chain must build too
+        from canebench.model.chain import build_chain
+
+        build_chain(cane, cane.push_points[0].id)
+
+
+def test_set_values_get_the_unit_checks_and_unknown_effects_are_refused(tmp_path, capsys):
+    with pytest.warns(InputWarning, match="modulus_pa.*GPa"):
+        ModelConfig().with_overrides({"modulus_pa": "4.57"})
+    assert main(["run", "--trials", "b1c1t1", "--backends", "pinocchio", "--set", "modulus_pa=4.57", "--strict",
+                 "--out", str(tmp_path / "r"), "--quiet"]) == 2
+    with pytest.raises(InputError, match="effects.*wind"):
+        ModelConfig().with_overrides({"effects": "wind,snow"})
+    assert ModelConfig(modulus_pa=3_000_000_000) == ModelConfig(modulus_pa=3e9)
+
+
+def test_resume_runs_timed_out_jobs_again(tmp_path, bundled_trials):
+    from canebench.execute.pipeline import make_jobs
+    from canebench.execute.runner import run_jobs
+
+    t = [t for t in bundled_trials if t.id == "b1c1t1"]
+    jobs = make_jobs(t, ["pinocchio"], PROTOCOLS["fast"], ModelConfig())
+    first = run_jobs(jobs, tmp_path, SerialExecutor(), timeout_s=1e-4)
+    assert first.results.status.iloc[0] == "timeout"
+    again = run_jobs(jobs, tmp_path, SerialExecutor(), timeout_s=600)
+    assert again.n_reused == 0 and again.results.status.iloc[0] == "ok"
+
+
+def test_the_beam_takes_the_twist_option_and_duplicate_backends_run_once(tmp_path):
+    out = tmp_path / "r"
+    assert main(["run", "--trials", "b1c1t1", "--backends", "pinocchio,beam,pinocchio", "--set", "twist_joint=true",
+                 "--out", str(out), "--no-report", "--quiet"]) == 0
+    res = pd.read_csv(out / "results.csv")
+    assert sorted(res.backend) == ["beam", "pinocchio"] and (res.status == "ok").all()
+
+
+def test_an_unreachable_scheduler_is_an_input_error(tmp_path, capsys):
+    assert main(["run", "--trials", "b1c1t1", "--backends", "pinocchio", "--executor", "dask", "--scheduler",
+                 "tcp://127.0.0.1:9", "--out", str(tmp_path / "r"), "--quiet"]) == 2
+    assert "--scheduler" in capsys.readouterr().err

@@ -113,6 +113,8 @@ def assumptions(trials: list, config: Any) -> list[str]:
     paper's 4.57 GPa") no longer holds when the configuration sets one.
     """
     out = sorted({s for t in trials for s in t.cane.provenance.get("assumptions", [])})
+    if config is None:  # a study sets the modulus itself
+        return [s for s in out if not s.lower().startswith("modulus")]
     if getattr(config, "modulus_pa", None) is not None:
         out = [s for s in out if not s.lower().startswith("modulus")]
         out.append(f"modulus: {config.modulus_pa:.4g} Pa for every cane (model configuration)")
@@ -122,7 +124,7 @@ def assumptions(trials: list, config: Any) -> list[str]:
 def backends(spec: str) -> tuple[list[str], dict[str, str]]:
     from ..registry import select
 
-    names = [n.strip() for n in spec.split(",") if n.strip()]
+    names = list(dict.fromkeys(n.strip() for n in spec.split(",") if n.strip()))  # each backend once
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         usable, skipped = select(names)

@@ -23,7 +23,15 @@ def main(a: argparse.Namespace) -> int:
 
     out = Path(a.out) if a.out else Path("canebench-runs") / _dt.datetime.now().strftime("converge-%Y%m%d-%H%M%S")
     t0 = time.perf_counter()
-    segs = tuple(int(s) for s in a.segments.split(","))
+    from ..errors import InputError
+
+    try:
+        segs = tuple(int(s) for s in a.segments.split(","))
+    except ValueError:
+        raise InputError("--segments", "segments", f"expected comma-separated whole numbers, got {a.segments!r}") \
+            from None
+    if min(segs) < 1:
+        raise InputError("--segments", "segments", "every segment count must be >= 1")
     r = converge(out, a.trials, segs, progress=lambda i, n, tid: print(f"[{i:3d}/{n}] {tid}", flush=True))
     print(r.beam_mesh_summary)
     if r.beam_mesh is not None and len(r.beam_mesh):

@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
+
+from ..errors import InputError, InputWarning
 
 from . import common
 
@@ -26,13 +29,26 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main(a: argparse.Namespace) -> int:
+    if a.limit is not None and a.limit < 1:
+        raise InputError("--limit", "limit", f"must be >= 1, got {a.limit}")
+    if a.max_steps is not None and a.max_steps < 3:
+        raise InputError("--max-steps", "max_steps", f"must be >= 3 (a slope needs 3 samples), got {a.max_steps}")
+    created = a.out is None or not Path(a.out).exists()
+    out = common.out_dir(a.out, "run")  # a bad --out fails before any work
+    try:
+        return _run(a, out)
+    except (InputError, InputWarning):
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # refused input leaves no empty run folder behind
+        raise
+
+
+def _run(a: argparse.Namespace, out: Path) -> int:
     from ..execute.pipeline import field_stage, make_jobs
     from ..execute.provenance import provenance
     from ..execute.runner import run_jobs
-    from ..errors import InputError
     from ..probe.protocol import get_protocol
 
-    out = common.out_dir(a.out, "run")  # a bad --out fails before any work
     data_dir, trials = common.trials(a)
     if a.limit:
         trials = trials[: a.limit]
@@ -74,6 +90,8 @@ def main(a: argparse.Namespace) -> int:
         from canebench.reports.build import build_report
 
         print(f"report: {build_report(out)}")
+    elif (out / "report.html").exists():
+        (out / "report.html").unlink()  # it described an earlier run in this folder: stale now
     print(f"results: {out / 'results.csv'}")
     if outcome.interrupted:
         common.say_interrupted(outcome, out)

@@ -1,43 +1,88 @@
-"""``canebench study NAME``: one of the paper's analyses, as a command (and a function)."""
+"""``canebench study NAME``: one of the paper's analyses, as a command (each is also a Python function)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
+
+from . import common
+
+SIM_STUDIES = ("naive", "morris", "sweep")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    st = sub.add_parser("study", help="run one of the paper's studies into a run folder (see 'canebench study -h')")
-    st.add_argument("name", choices=["modulus"],
-                    help="modulus: three-point bending -> flexural modulus by season, variety and age, "
-                         "Welch t-tests, the paper's two figures, named modulus distributions")
-    st.add_argument("--data", help="three-point bending dataset (samples.csv + tests/); default: the bundled "
-                                   "SYNTHETIC sample set")
-    st.add_argument("--out", help="run folder (default canebench-runs/study-<name>-<time>)")
+    st = sub.add_parser("study", help="run one of the paper's studies into a run folder")
+    st.add_argument("name", choices=["modulus", *SIM_STUDIES],
+                    help="modulus: three-point bending -> flexural modulus, t-tests, distributions; naive: the "
+                         "paper's naive case on every engine; morris: Method of Morris (4 factors, 6 levels, 4 "
+                         "trajectories); sweep: modulus x diameter factor, 5 x 5")
+    st.add_argument("--data", help="modulus: three-point bending dataset (default: the bundled SYNTHETIC set)")
+    common.add_data_options(st)
+    st.add_argument("--backends", default="pinocchio", help="engines for naive/morris/sweep (default pinocchio)")
+    st.add_argument("--protocol", default="fast")
+    st.add_argument("--out", help="run folder (default canebench-runs/study-<name>-<time>); an existing one resumes")
     st.add_argument("--no-report", action="store_true")
+    common.add_executor_options(st)
     st.set_defaults(fn=main)
 
 
 def main(a: argparse.Namespace) -> int:
     from ..studies import STUDIES
-    from . import common
 
     out = common.out_dir(a.out, f"study-{a.name}")
+    t0 = time.perf_counter()
+    code = 0
     if a.name == "modulus":
         from ..data.bending import bundled_bending_dataset
 
         data = Path(a.data) if a.data else bundled_bending_dataset()
         res = STUDIES["modulus"](data, out)
-        meta = res.meta
         print(f"canebench study modulus: {len(res.samples)} samples from {data}"
-              f"{' (SYNTHETIC data)' if meta.get('synthetic') else ''} -> {out}")
+              f"{' (SYNTHETIC data)' if res.meta.get('synthetic') else ''} -> {out}")
         cols = [c for c in ("family", "group", "n", "mean_gpa", "sd_gpa", "min_gpa", "max_gpa") if c in res.groups]
         print(res.groups[cols].to_string(index=False, float_format=lambda v: f"{v:.3f}"))
         print("\nWelch t-tests:")
         print(res.ttests.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    else:
+        from ..execute.provenance import provenance
+        from ..probe.protocol import get_protocol
+
+        data_dir, trials = common.trials(a)
+        usable, skipped = common.backends(a.backends)
+        proto = get_protocol(a.protocol)
+        ex = common.executor(a)
+        meta = provenance(usable, proto, None, {"command": " ".join(sys.argv), "dataset": str(data_dir.resolve()),
+                                                "skipped_backends": skipped,
+                                                "assumptions": common.assumptions(trials, None)})
+        print(f"canebench study {a.name}: {len(trials)} trials from {data_dir}, backends {','.join(usable)} -> {out}")
+        common.sigterm_as_interrupt()
+        res = STUDIES[a.name](trials, usable, out, ex, proto, common.progress(a), meta,
+                              timeout_s=a.timeout or None, fresh=a.fresh)
+        print(f"done in {time.perf_counter() - t0:.1f} s: {res.outcome.summary()}")
+        _print(a.name, res)
+        if res.outcome.interrupted:
+            common.say_interrupted(res.outcome, out)
+        code = res.outcome.exit_code
     if not a.no_report:
         from canebench.reports.build import build_report
 
-        print(f"report: {build_report(out)}", file=sys.stdout)
-    return 0
+        print(f"report: {build_report(out)}")
+    return code
+
+
+def _print(name: str, res) -> None:  # noqa: ANN001
+    f = lambda v: f"{v:.3g}"  # noqa: E731
+    if name == "naive":
+        ok = res.table[res.table.status == "ok"]
+        for b, g in ok.groupby("backend"):
+            print(f"  {b:10s} median |ln(k_sim/k_field)| {g.log_ratio.abs().median():.3f}, range "
+                  f"{g.log_ratio.min():.2f}..{g.log_ratio.max():.2f} over {len(g)} trials")
+        print(res.variance.to_string(index=False, float_format=f))
+        print(res.by_rank.to_string(index=False, float_format=f))
+    elif name == "morris":
+        print(res.ranking.to_string(index=False, float_format=f))
+    elif name == "sweep":
+        for b, v in res.summary.items():
+            print(f"  {b}: {v}")

@@ -117,6 +117,8 @@ def _num(value: Any, src: str, fld: str, *, positive: bool = False, nonneg: bool
         x = float(value)
     except ValueError:
         raise InputError(src, fld, f"expected a number, got {value!r}") from None
+    except OverflowError:
+        raise InputError(src, fld, f"number out of range ({str(value)[:20]}...)") from None
     if not math.isfinite(x):
         raise InputError(src, fld, f"must be finite, got {value!r}")
     if positive and x <= 0:
@@ -255,8 +257,14 @@ def _extent_error(cane: CaneDescription, fld: str, where: Location, length: floa
 
 
 def _check_extent(cane: CaneDescription) -> None:
-    """Push points and calipers must lie on the cane: an error at load, not at chain build."""
-    pts = cane.polyline
+    """Push points and calipers must lie on the cane: an error at load, not at chain build.
+
+    Checked on the centreline the chain is cut from (a raw polyline smoothed with
+    the default Chaikin settings, which shortens it and lowers arches a little).
+    """
+    from ..model.geometry import chaikin
+
+    pts = chaikin(cane.polyline) if cane.raw_polyline else cane.polyline
     length = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
     zmin, zmax = float(pts[:, 2].min()), float(pts[:, 2].max())
     for i, c in enumerate(cane.calipers):
@@ -279,7 +287,8 @@ def _check_plausible(cane: CaneDescription) -> None:
     lo, hi = PLAUSIBLE_DIAMETER_M
     for i, c in enumerate(cane.calipers):
         if c.diameter > hi:
-            unit = "; looks like millimetres" if c.diameter >= 0.5 else ""
+            unit = ("; looks like millimetres" if c.diameter >= 1.0 else
+                    "; looks like centimetres" if c.diameter >= 0.1 else "")
             warn_input(src, f"calipers[{i}].diameter", f"{c.diameter:.4g} m is implausible ({lo:g}-{hi:g} m){unit}")
         elif c.diameter < lo:
             warn_input(src, f"calipers[{i}].diameter", f"{c.diameter:.4g} m is implausibly thin ({lo:g}-{hi:g} m)")

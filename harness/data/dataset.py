@@ -67,6 +67,9 @@ def read_push_points(path: Path) -> pd.DataFrame:
         if col in ("height_mm", "diameter_mm") and (vals <= 0).any():
             i = int((vals <= 0).to_numpy().argmax())
             raise InputError(src, col, f"row {i + 2}: must be > 0, got {vals.iloc[i]}")
+        if col in ("bush", "cane", "trial") and np.any(vals.to_numpy(float) != np.round(vals.to_numpy(float))):
+            i = int((vals.to_numpy(float) != np.round(vals.to_numpy(float))).argmax())
+            raise InputError(src, col, f"row {i + 2}: must be a whole number, got {vals.iloc[i]!r}")
         df[col] = vals
     dup = df.duplicated(["bush", "cane", "trial"])
     if dup.any():

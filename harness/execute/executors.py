@@ -288,10 +288,24 @@ class DaskExecutor(Executor):
 
 
 def make_executor(name: str = "local", jobs: int | None = None, scheduler: str | None = None) -> Executor:
-    """An executor by registry name, configured from CLI-style options."""
+    """An executor by registry name, configured from CLI-style options.
+
+    A ``scheduler`` address is tried at once, so a wrong one is an input
+    error before any work, not a traceback after a connection timeout.
+    """
+    from ..errors import InputError
+
     cls = EXECUTORS[name]
     if cls is LocalExecutor:
         return LocalExecutor(jobs)
     if cls is DaskExecutor:
+        if scheduler:
+            from dask.distributed import Client
+
+            try:
+                Client(scheduler, timeout=10, set_as_default=False).close()
+            except Exception as exc:
+                raise InputError("--scheduler", "scheduler",
+                                 f"cannot reach a Dask scheduler at {scheduler}: {type(exc).__name__}: {exc}") from None
         return DaskExecutor(scheduler, jobs)
     return cls()

@@ -9,7 +9,10 @@ A job's key is a hash of everything its result depends on:
   field trial's duration sets);
 * the complete model configuration, including any physical effects and
   their parameters added later (``ModelConfig.to_dict``);
-* canebench's version.
+* canebench's code: a hash of every source file of the installed package
+  (and of the backend's module when a plugin lives elsewhere), so a
+  resumed run never mixes results of two versions of the physics, however
+  small the change (the package version alone is not bumped for each).
 
 The chain a job builds is a pure function of the cane, the push point, the
 configuration and canebench's code, so this key determines the chain's
@@ -26,8 +29,10 @@ asked for by two studies is computed once.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
+from pathlib import Path
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -58,10 +63,40 @@ def _default(obj: Any) -> Any:
 
 
 def cane_physics(trial: Trial) -> dict[str, Any]:
-    """The part of a cane description a simulation depends on."""
+    """The part of a cane description a simulation depends on (not its file paths or notes)."""
     d = cane_to_dict(trial.cane)
     d.pop("provenance", None)
+    for p in d.get("push_points", []):
+        p.pop("trial", None)
     return d
+
+
+@functools.lru_cache(maxsize=None)
+def code_fingerprint(extra_module: str | None = None) -> str:
+    """Hash of canebench's source files (and of ``extra_module``'s file, for plugin backends)."""
+    import canebench
+
+    h = hashlib.sha256()
+    root = Path(canebench.__file__).resolve().parent
+    files = sorted(root.rglob("*.py"))
+    import canebench.backends as cb
+
+    broot = Path(cb.__file__).resolve().parent
+    if broot != root / "backends":  # editable layout: backends/ is a sibling of harness/
+        files += sorted(broot.rglob("*.py"))
+    if extra_module:
+        try:
+            import importlib
+
+            f = getattr(importlib.import_module(extra_module), "__file__", None)
+            if f:
+                files.append(Path(f))
+        except Exception:
+            pass
+    for f in files:
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
 
 
 def config_hash(config: ModelConfig) -> str:
@@ -98,6 +133,11 @@ class Job:
     n_steps: int
     labels: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
     backend_cls: Any = field(default=None, compare=False, hash=False)
+    backend_module: str = field(default="", compare=False, hash=False)
+
+    def _plugin_module(self) -> str | None:
+        mod = getattr(self.backend_cls, "__module__", None) or self.backend_module
+        return None if not mod or mod.startswith("canebench.") else mod
 
     @property
     def key(self) -> str:
@@ -107,6 +147,7 @@ class Job:
                 "cane": cane_physics(self.trial), "push": self.trial.push_id, "backend": self.backend,
                 "engine": self.engine_version, "protocol": self.protocol.to_dict(), "config": self.config.to_dict(),
                 "n_steps": int(self.n_steps), "canebench": __version__,
+                "code": code_fingerprint(self._plugin_module()),
             }
             k = hashlib.sha256(_canonical(payload).encode()).hexdigest()[:24]
             object.__setattr__(self, "_key", k)

@@ -25,6 +25,7 @@ import pandas as pd
 
 from ..data.dataset import Trial
 from ..data.rig import read_rig_csv
+from ..errors import InputError
 from ..measure.field import FieldFit, extract_field_stiffness
 from ..model.chain import build_chain
 from ..model.config import ModelConfig
@@ -103,17 +104,21 @@ def field_stage(trials: Iterable[Trial], window_mm: float | None = None) -> dict
     """Field stiffness of every trial, by trial id (a bad CSV is a reason, not a crash).
 
     ``window_mm`` must be the protocol's ``fit_window_mm`` so both sides of a score use one window.
+
+    Raises
+    ------
+    InputError
+        A rig CSV that is named but missing, unreadable or malformed: input is
+        refused before any simulation (the message names the file and field).
     """
     out: dict[str, FieldResult] = {}
     for t in trials:
         if t.id in out:
             continue
-        try:
-            ff = field_fit_for(t, window_mm)
-            reason = ff.reason if ff is not None else "no field trial"
-        except Exception as exc:  # bad field CSV: still simulate, but do not score
-            ff, reason = None, f"field data unreadable: {exc}"
-        out[t.id] = FieldResult(t, ff, reason)
+        if t.csv is not None and not t.csv.exists():
+            raise InputError(str(t.csv), "<file>", f"rig CSV of trial {t.id} not found")
+        ff = field_fit_for(t, window_mm)
+        out[t.id] = FieldResult(t, ff, ff.reason if ff is not None else "no field trial")
     return out
 
 
@@ -138,12 +143,13 @@ def make_jobs(trials: list[Trial], backends: list[str], proto: Protocol,
     reg = discover()
     versions = {b: backend_version(b) for b in backends}
     classes = {b: (reg[b].cls if b in reg and not reg[b].from_entry_point else None) for b in backends}
+    modules = {b: (reg[b].target.partition(":")[0] if b in reg else "") for b in backends}
     jobs = []
     for i, (t, cfg) in enumerate(zip(trials, configs)):
         n = fields[t.id].n_steps(proto, max_steps)
         lab = labels[i] if labels else {}
         for b in backends:
-            jobs.append(Job(t, b, versions[b], proto, cfg, n, dict(lab), classes[b]))
+            jobs.append(Job(t, b, versions[b], proto, cfg, n, dict(lab), classes[b], modules[b]))
     return jobs
 
 

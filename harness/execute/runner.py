@@ -117,6 +117,15 @@ def assemble(jobs: list[Job], done: dict[str, JobResult], fields: dict[str, Fiel
     return results_table(rows), pd.DataFrame(traces, columns=tcols), _field_table(fields, trial_order)
 
 
+RETRY_REASONS = ("worker process died", "worker error", "dask:")
+
+
+def retryable(result: JobResult) -> bool:
+    """True for results a resume must not reuse: time limits and infrastructure failures."""
+    row = result.row
+    return row.get("status") == "timeout" or str(row.get("reason", "")).startswith(RETRY_REASONS)
+
+
 def run_jobs(jobs: list[Job], out_dir: str | Path | None = None, executor: Executor | None = None,
              fields: dict[str, FieldResult] | None = None, timeout_s: float | None = DEFAULT_TIMEOUT_S,
              fresh: bool = False, progress: Progress | None = None, meta: dict[str, Any] | None = None,
@@ -150,6 +159,8 @@ def run_jobs(jobs: list[Job], out_dir: str | Path | None = None, executor: Execu
     store = Store.in_folder(out, fresh=fresh) if out is not None else None
     keys = list(dict.fromkeys(j.key for j in jobs))
     done: dict[str, JobResult] = store.get_many(keys) if store is not None else {}
+    # a timeout or a lost worker says nothing about the physics: run those again
+    done = {k: r for k, r in done.items() if not retryable(r)}
     n_reused = len(done)
     todo, queued = [], set()
     for j in jobs:
@@ -161,19 +172,29 @@ def run_jobs(jobs: list[Job], out_dir: str | Path | None = None, executor: Execu
         _write_state(out, run_meta, "running", len(keys), len(done), n_reused, [])
     interrupted = False
     progress.start(len(keys), n_reused, label)
-    gen = executor.map(todo, timeout_s, out)
     try:
-        for job, res in gen:
-            res.row.setdefault("trial", job.trial.id)
-            if store is not None:
-                store.put(res)
-            done[res.key] = res
-            progress.update(job, res)
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        gen.close()
-        progress.close()
+        gen = executor.map(todo, timeout_s, out)
+        try:
+            for job, res in gen:
+                res.row.setdefault("trial", job.trial.id)
+                if store is not None:
+                    store.put(res)
+                done[res.key] = res
+                progress.update(job, res)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            gen.close()
+            progress.close()
+    except BaseException as exc:  # the executor itself failed: say so in run.json, keep what is done
+        if out is not None:
+            res_df, traces, field_df = assemble(jobs, done, fields, with_traces)
+            write_exports(out, RunOutcome(res_df, traces, field_df, len(keys), n_reused, len(done) - n_reused))
+            _write_state(out, {**run_meta, "error": f"{type(exc).__name__}: {exc}"}, "error", len(keys),
+                         len(done), n_reused, [k for k in keys if k not in done])
+        if store is not None:
+            store.close()
+        raise
     missing = [k for k in keys if k not in done]
     interrupted = interrupted or bool(missing)
     res_df, traces, field_df = assemble(jobs, done, fields, with_traces)

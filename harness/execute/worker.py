@@ -39,6 +39,20 @@ def execute_many(jobs: list[Job], timeout_s: float | None) -> list[JobResult]:
     return [execute(job, timeout_s) for job in jobs]
 
 
+def _die_with_parent() -> None:
+    """Linux: ask the kernel to SIGKILL this worker when its parent (the forkserver, which
+    exits with the run) dies; a second guard beside the lifeline thread, for a worker
+    stuck in C code that holds the GIL."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        PR_SET_PDEATHSIG = 1
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except Exception:  # not Linux: the lifeline thread still works
+        pass
+
+
 def _watch_parent(lifeline: Any) -> None:
     try:
         lifeline.recv()  # the parent never sends: this returns only by EOF
@@ -51,6 +65,7 @@ def worker_main(conn: Any, lifeline: Any, timeout_s: float | None, workdir: Any 
     """Loop: receive a job, run it, send the result; ``None`` ends the loop."""
     if workdir is not None:
         os.chdir(workdir)  # engine side files (MUJOCO_LOG.TXT) land in the run folder
+    _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threading.Thread(target=_watch_parent, args=(lifeline,), daemon=True).start()

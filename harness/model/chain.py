@@ -169,12 +169,18 @@ def cane_curve(cane: CaneDescription, config: ModelConfig) -> Curve:
 def resolve_s(curve: Curve, where: Location, source: str, fld: str) -> float:
     """Arc length of a location given by ``s`` or ``height``."""
     if where.s is not None:
-        if where.s > curve.length * (1 + 1e-9):
+        # 1 mm of slack, as at load: smoothing with other settings than the load check's may shorten the curve
+        if where.s > curve.length + 1e-3:
             raise InputError(source, f"{fld}.s", f"{where.s:.4g} m is beyond the cane's length {curve.length:.4g} m")
         return float(min(where.s, curve.length))
     s = curve.s_at_height(float(where.height))
     if s is None:
-        zmin, zmax = curve.points[:, 2].min(), curve.points[:, 2].max()
+        z = curve.points[:, 2]
+        zmin, zmax = z.min(), z.max()
+        if zmax < where.height <= zmax + 1e-3:  # the same 1 mm of slack as at load: the highest point
+            return float(curve.s[int(np.argmax(z))])
+        if zmin - 1e-3 <= where.height < zmin:
+            return float(curve.s[int(np.argmin(z))])
         raise InputError(source, f"{fld}.height",
                          f"{where.height:.4g} m is outside the cane's heights [{zmin:.4g}, {zmax:.4g}] m")
     return s

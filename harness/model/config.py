@@ -100,6 +100,13 @@ class ModelConfig:
     effects: tuple[str, ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:
+        # one number, one key: 3000000000 and 3e9 are the same modulus
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, int) and not isinstance(v, bool) and "float" in str(f.type):
+                object.__setattr__(self, f.name, float(v))
+        if isinstance(self.effects, list):
+            object.__setattr__(self, "effects", tuple(self.effects))
         self.validate()
 
     def validate(self, source: str = "model configuration") -> None:
@@ -120,8 +127,10 @@ class ModelConfig:
             raise InputError(source, "probe_angle_deg", "must be within (-89, 89) degrees")
         if not (math.isfinite(self.gravity) and self.gravity >= 0):
             raise InputError(source, "gravity", "must be a finite number >= 0")
-        if not (0 < self.chaikin_strength <= 0.5) or self.chaikin_iterations < 0:
-            raise InputError(source, "chaikin_strength", "strength must be in (0, 0.5], iterations >= 0")
+        if not (0 < self.chaikin_strength <= 0.5):
+            raise InputError(source, "chaikin_strength", "must be in (0, 0.5]")
+        if self.chaikin_iterations < 0:
+            raise InputError(source, "chaikin_iterations", "must be >= 0")
         if not (self.min_diameter_m > 0):
             raise InputError(source, "min_diameter_m", "must be > 0")
         if not (-1.0 < self.poisson_ratio < 0.5):
@@ -134,7 +143,13 @@ class ModelConfig:
             raise InputError(source, "beam_rtol", f"must be in (0, 0.1), got {self.beam_rtol!r}")
         if self.beam_max_elements < self.beam_elements:
             raise InputError(source, "beam_max_elements", "must be >= beam_elements")
+        from .effects import EFFECTS
         from .stiffness import FORMULAS  # late: the formulas module registers on import
+
+        unknown = [e for e in self.effects if e not in EFFECTS]
+        if unknown:
+            raise InputError(source, "effects", f"unknown physical effect(s) {', '.join(unknown)}; registered: "
+                                                f"{', '.join(EFFECTS) or 'none yet'}")
 
         if self.stiffness_formula not in FORMULAS:
             import difflib
@@ -142,7 +157,7 @@ class ModelConfig:
             close = difflib.get_close_matches(self.stiffness_formula, list(FORMULAS), n=1)
             raise InputError(source, "stiffness_formula", f"unknown formula {self.stiffness_formula!r}"
                              + (f"; did you mean {close[0]!r}?" if close else f"; known: {', '.join(FORMULAS)}"))
-        for name in ("segments", "min_segments", "chaikin_iterations", "beam_elements"):
+        for name in ("segments", "min_segments", "chaikin_iterations", "beam_elements", "beam_max_elements"):
             v = getattr(self, name)
             if v is not None and (isinstance(v, bool) or not isinstance(v, int)):
                 raise InputError(source, name, f"must be an integer, got {v!r}")
@@ -161,14 +176,31 @@ class ModelConfig:
                 raise InputError(source, key, f"unknown model setting; known: {', '.join(sorted(names))}")
             changes[key] = _coerce(raw, hints[key], source, key)
         try:
-            return self.replace(**changes)
+            out = self.replace(**changes)
         except InputError as exc:  # name where the bad value came from
             raise InputError(source, exc.field, exc.message) from None
+        _warn_implausible(changes, source)
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
         d["effects"] = list(self.effects)
         return d
+
+
+def _warn_implausible(changes: Mapping[str, Any], source: str) -> None:
+    """The same unit checks as for cane files, for values set on the command line."""
+    from ..data.cane import PLAUSIBLE_DENSITY, PLAUSIBLE_MODULUS_PA
+    from ..errors import warn_input
+
+    E = changes.get("modulus_pa")
+    if E is not None and not (PLAUSIBLE_MODULUS_PA[0] <= E <= PLAUSIBLE_MODULUS_PA[1]):
+        unit = "; looks like GPa, not Pa" if E < 1e3 else ("; looks like MPa, not Pa" if E < 1e6 else "")
+        warn_input(source, "modulus_pa", f"{E:.4g} Pa is implausible for green wood "
+                                         f"({PLAUSIBLE_MODULUS_PA[0]:g}-{PLAUSIBLE_MODULUS_PA[1]:g} Pa){unit}")
+    rho = changes.get("density")
+    if rho is not None and not (PLAUSIBLE_DENSITY[0] <= rho <= PLAUSIBLE_DENSITY[1]):
+        warn_input(source, "density", f"{rho:.4g} kg/m^3 is implausible for wood")
 
 
 def parse_assignments(items: list[str] | None, source: str = "--set") -> dict[str, str]:
@@ -206,8 +238,9 @@ def _coerce(raw: Any, hint: Any, source: str, key: str) -> Any:
         if base is float:
             v = float(text)
             if not math.isfinite(v):
-                raise InputError(source, key, f"must be a finite number, got {raw!r}")
+                raise ValueError(text)
             return v
         return text
     except ValueError as exc:
-        raise InputError(source, key, f"cannot read {raw!r} as {getattr(base, '__name__', base)}") from exc
+        what = "a finite number" if base is float else getattr(base, "__name__", base)
+        raise InputError(source, key, f"cannot read {raw!r} as {what}") from exc
