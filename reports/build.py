@@ -274,6 +274,24 @@ def _state_section(meta: dict) -> str:
             f'{html.escape(str(meta.get("resume", "")))}</p>')
 
 
+def _field_section(run_dir: Path) -> str:
+    """Field stiffness with its uncertainty, from ``field.csv``."""
+    field = _read_table(run_dir / "field.csv")
+    if not len(field) or "k_field" not in field.columns:
+        return ""
+    cols = [c for c in ("trial", "k_field", "k_se", "k_ci_low", "k_ci_high", "k_first_10mm", "r2", "onset_mm",
+                        "tare_gf", "usable", "reason") if c in field.columns]
+    usable = field[field.usable.astype(bool)] if "usable" in field.columns else field
+    rel = (usable.k_ci_high - usable.k_ci_low) / (2 * usable.k_field) if "k_ci_low" in usable.columns else None
+    window = field.window_mm.dropna().unique() if "window_mm" in field.columns else []
+    note = (f"{len(usable)} of {len(field)} trials have a slope; 95 % bootstrap interval half-width median "
+            f"{rel.median():.1%} of the slope (widest {rel.max():.1%}); fit window "
+            f"{'first ' + str(window[0]) + ' mm' if len(window) else 'the whole contact'}. Thresholds apply to "
+            "the tared contact force (the rig's own script tested the raw reading).") if rel is not None else ""
+    return (f"<h2>Field stiffness and its uncertainty</h2><p>{html.escape(note)}</p>"
+            + field[cols].to_html(index=False, float_format=lambda v: f"{v:.4g}"))
+
+
 def _read_meta(run_dir: Path) -> dict:
     """``run.json``, or a note that it is missing or unreadable (the tables still make a report)."""
     p = run_dir / "run.json"
@@ -290,6 +308,10 @@ def _study_sections(run_dir: Path) -> str:
     from canebench.reports.paper import paper_sections
 
     parts = [paper_sections(run_dir)]
+    if (run_dir / "contact_meta.json").exists():
+        from canebench.studies.contact import contact_section_html
+
+        parts.append(contact_section_html(run_dir))
     if (run_dir / "modulus_meta.json").exists():
         from canebench.studies.modulus import modulus_section_html
 
@@ -375,7 +397,9 @@ def build_report(run_dir: Path) -> Path:
         banner = ('<p style="background:#fde;padding:8px;border:1px solid #c88"><b>SYNTHETIC DATA.</b> '
                   'These trials come from the bundled generator (canebench.canes.generate), not from the field.</p>')
     assumptions = "".join(f"<li>{html.escape(a)}</li>" for a in meta.get("assumptions", []))
-    per_trial = res[["trial", "backend", "k_sim", "k_field", "log_ratio", "status", "n_links", "n_samples", "wall_s"]]
+    per_trial = res[[c for c in ("trial", "backend", "answer", "k_sim", "k_field", "k_field_ci_low", "k_field_ci_high",
+                                 "log_ratio", "status", "n_links", "n_samples", "wall_s") if c in res.columns]]
+    field_html = _field_section(run_dir)
     settings = meta.get("backend_settings", {})
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>canebench report</title>
 <style>body{{font-family:sans-serif;max-width:1200px;margin:auto}} table{{border-collapse:collapse;font-size:12px}}
@@ -393,6 +417,7 @@ engines {html.escape(json.dumps(meta.get('engines', {})))}; canebench {html.esca
 {'<h2>Force-displacement examples</h2><img src="traces.png">' if len(traces) and len(res) and not multi else ''}
 {comparison}{beam_section}{convergence_section}{_study_sections(run_dir)}
 <h2>Failed or unscored</h2>{failed.to_html(index=False) if len(failed) else '<p>none</p>'}
+{field_html}
 <h2>Per trial</h2>{per_trial.to_html(index=False, float_format=lambda v: f'{v:.4g}')}
 <h2>Configuration</h2><pre>{html.escape(json.dumps({'model_config': meta.get('model_config'), 'protocol': meta.get('protocol'), 'backend_settings': settings}, indent=1))}</pre>
 </body></html>"""

@@ -23,9 +23,14 @@ def test_bundled_layout_matches_the_field_campaign(bundled_trials):
 
 
 def test_scoring_code_never_reads_the_truth():
+    # the hidden stiffness truth of the bundled set is read by no code at all; the contact
+    # study reads its detection truth only to score detections after they are made
     for pkg in ("harness", "backends", "reports"):
         for f in (REPO / pkg).rglob("*.py"):
-            assert "synthetic-truth" not in f.read_text() and "truth.json" not in f.read_text(), f
+            text = f.read_text()
+            assert "synthetic-truth" not in text, f
+            if f.name != "contact.py" or f.parent.name != "studies":
+                assert "truth.json" not in text, f
 
 
 def test_synthetic_trial_files_do_not_look_like_field_copies():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -14,8 +15,9 @@ SIM_STUDIES = ("naive", "morris", "sweep")
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     st = sub.add_parser("study", help="run one of the paper's studies into a run folder")
-    st.add_argument("name", choices=["modulus", *SIM_STUDIES],
-                    help="modulus: three-point bending -> flexural modulus, t-tests, distributions; naive: the "
+    st.add_argument("name", choices=["contact", "modulus", *SIM_STUDIES],
+                    help="contact: IMU contact detection (the paper's rule) and a force-only detector; "
+                         "modulus: three-point bending -> flexural modulus, t-tests, distributions; naive: the "
                          "paper's naive case on every engine; morris: Method of Morris (4 factors, 6 levels, 4 "
                          "trajectories); sweep: modulus x diameter factor, 5 x 5")
     st.add_argument("--data", help="modulus: three-point bending dataset (default: the bundled SYNTHETIC set)")
@@ -34,7 +36,17 @@ def main(a: argparse.Namespace) -> int:
     out = common.out_dir(a.out, f"study-{a.name}")
     t0 = time.perf_counter()
     code = 0
-    if a.name == "modulus":
+    if a.name == "contact":
+        from canebench import canes
+
+        data = Path(a.field) if a.field else Path(canes.__file__).resolve().parent / "synthetic-contact"
+        res = STUDIES["contact"](data, out)
+        meta = res.meta
+        print(f"canebench study contact: {data} -> {out}")
+        print(json.dumps({k: meta[k] for k in meta if k in ("counts", "paper", "events")}, indent=1, default=str))
+        if (out / "contact_scores.json").exists():
+            print("against the dataset's truth:", (out / "contact_scores.json").read_text())
+    elif a.name == "modulus":
         from ..data.bending import bundled_bending_dataset
 
         data = Path(a.data) if a.data else bundled_bending_dataset()

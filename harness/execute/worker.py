@@ -39,6 +39,17 @@ def execute_many(jobs: list[Job], timeout_s: float | None) -> list[JobResult]:
     return [execute(job, timeout_s) for job in jobs]
 
 
+def _warm_up() -> None:
+    """Import the engines before the first job, so a job's time limit counts the job, not start-up."""
+    import warnings
+
+    from ..registry import discover
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        discover()
+
+
 def _die_with_parent() -> None:
     """Linux: ask the kernel to SIGKILL this worker when its parent (the forkserver, which
     exits with the run) dies; a second guard beside the lifeline thread, for a worker
@@ -69,6 +80,7 @@ def worker_main(conn: Any, lifeline: Any, timeout_s: float | None, workdir: Any 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threading.Thread(target=_watch_parent, args=(lifeline,), daemon=True).start()
+    _warm_up()
     while True:
         try:
             job = conn.recv()

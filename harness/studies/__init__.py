@@ -16,6 +16,7 @@ STUDIES: Registry[Callable] = Registry("study")
 def _register_builtin() -> None:
     from .agreement import run_agreement
     from .convergence import converge
+    from .contact import contact_study
     from .modulus import modulus_study
     from .paper import morris_study, naive_case, sweep_study
 
@@ -26,6 +27,8 @@ def _register_builtin() -> None:
     STUDIES.add("naive", naive_case, ("paper", "engines"), "the paper's naive case on every engine")
     STUDIES.add("morris", morris_study, ("paper", "sensitivity"), "Method of Morris per trial and engine (SALib)")
     STUDIES.add("sweep", sweep_study, ("paper", "calibration"), "modulus x diameter factor sweep, 5 x 5")
+    STUDIES.add("contact", contact_study, ("paper", "field"),
+                "contact detection: IMU change points (the paper's rule) and a force-only detector")
     STUDIES.add("modulus", modulus_study, ("paper", "material"),
                 "three-point bending: flexural modulus by season, variety and age; Welch t-tests; distributions")
 
