@@ -305,9 +305,10 @@ def _read_meta(run_dir: Path) -> dict:
 
 def _study_sections(run_dir: Path) -> str:
     """Sections of the studies whose files are in the folder (rebuilt from those files)."""
+    from canebench.reports.findings import findings_html
     from canebench.reports.paper import paper_sections
 
-    parts = [paper_sections(run_dir)]
+    parts = [findings_html(run_dir), paper_sections(run_dir)]
     if (run_dir / "contact_meta.json").exists():
         from canebench.studies.contact import contact_section_html
 

@@ -76,3 +76,19 @@ def test_study_command_resumes_and_reports(tmp_path):
     assert main(args) == 0  # rerun: everything reused
     assert json.loads((out / "run.json").read_text())["jobs_reused"] == 3
     assert np.isfinite(pd.read_csv(out / "naive.csv").log_ratio).all()
+
+
+@pytest.mark.field
+def test_findings_on_the_real_data(field_dir, tmp_path):
+    from canebench.reports.findings import data_checks, findings
+
+    d = data_checks(field_dir)
+    # the published rig logs: 0.5 s per 0.5 mm sample (1 mm/s), trials of at most 44 s
+    assert d["sample_period_s"] == pytest.approx(0.5, abs=0.01) and d["speed_mm_per_s"] == pytest.approx(1.0, abs=0.02)
+    assert d["longest_trial_s"] <= 45 and len(d["trial1_not_highest"]) == 2
+    for s in ("naive", "sweep"):
+        assert main(["study", s, "--field", str(field_dir), "--trials", "b1*,b5*", "--backends", "pinocchio",
+                     "--out", str(tmp_path), "--quiet", "--no-report"]) == 0
+    topics = [t for t, _, _ in findings(tmp_path)]
+    assert {"naive case", "push height", "where the error lies", "parameter sweep",
+            "published data: protocol", "published data: push points"} <= set(topics)
