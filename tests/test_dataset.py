@@ -59,3 +59,17 @@ def test_field_run_scores_real_trials(field_dir, tmp_path):
     assert (res[res.trial == "b4c1t1"].status == "ok").all() and (res[res.trial == "b4c1t1"].k_field < 0.01).all()
     ok = res[res.status == "ok"]
     assert len(ok) == 8 and ok.k_field.between(0.005, 1.5).all()
+
+
+def test_bundled_polylines_do_not_fold_and_the_truth_shares_no_chain_code():
+    import warnings
+
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.errors import InputWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InputWarning)  # a fold, a unit or an orientation warning fails here
+        assert len(load_dataset(bundled_dataset())) == 54
+    # the hidden truth is the continuum rod, not the harness's chains or their exact statics
+    src = (REPO / "canes" / "generate.py").read_text()
+    assert "Rod(" in src and "assemble_chain" not in src and "PinocchioStatic" not in src
