@@ -32,7 +32,7 @@ def _save(fig, path: Path, res: pd.DataFrame | None, dpi: int = 100) -> None:
     notes: list[str] = []
     if res is not None and "assumptions" in res.columns:
         for a in res["assumptions"].dropna().unique():
-            notes += [x.strip() for x in str(a).split(";") if x.strip()]
+            notes += [x.strip() for x in str(a).split(" | ") if x.strip()]
     notes = list(dict.fromkeys(notes))
     if notes:
         fig.subplots_adjust(bottom=min(0.35, fig.subplotpars.bottom + 0.045 * len(notes)))

@@ -40,6 +40,7 @@ RESULT_COLUMNS = [
     "field_usable", "field_reason", "synthetic", "assumptions", "chain_hash", "config_hash", "job_key",
 ]
 SIM_STATUSES = ("ok", "failed", "timeout")
+ASSUMPTION_SEP = " | "  # assumptions themselves contain semicolons
 
 
 @dataclass
@@ -64,7 +65,8 @@ class FieldResult:
 
     def row(self) -> dict[str, Any]:
         ff = self.fit
-        geo = "; ".join(a for a in self.trial.cane.provenance.get("assumptions", []) if a.startswith("geometry"))
+        geo = ASSUMPTION_SEP.join(a for a in self.trial.cane.provenance.get("assumptions", [])
+                                  if a.startswith("geometry"))
         if ff is None:
             return {"trial": self.trial.id, "usable": False, "reason": self.reason, "assumptions": geo}
         return {"trial": self.trial.id, "assumptions": geo, "k_field": ff.k_n_per_mm, "k_se": ff.se,
@@ -82,7 +84,7 @@ class FieldResult:
 
 
 def trial_assumptions(trial: Trial, config: ModelConfig) -> str:
-    """The assumptions behind one row, true for its configuration ("; "-joined).
+    """The assumptions behind one row, true for its configuration (joined by :data:`ASSUMPTION_SEP`).
 
     A dataset's statement about the modulus no longer holds when the
     configuration sets one, so it is replaced, never left standing.
@@ -91,7 +93,7 @@ def trial_assumptions(trial: Trial, config: ModelConfig) -> str:
     if config.modulus_pa is not None:
         out = [a for a in out if not a.lower().startswith("modulus")]
         out.append(f"modulus: {config.modulus_pa:.4g} Pa for every cane (model configuration)")
-    return "; ".join(out)
+    return ASSUMPTION_SEP.join(out)
 
 
 def field_fit_for(trial: Trial, window_mm: float | None = None) -> FieldFit | None:
