@@ -106,6 +106,7 @@ class BeamStatic(StaticModel):
         rod = rodmod.Rod(rod_spec(chain), float(chain.meta["s_push"]), chain.direction, n)
         k = rod.linear_stiffness()
         self.mesh_history = [(len(rod.h), k)]
+        err = float("nan")  # relative change of the last refinement (none yet)
         while True:
             if 2 * len(rod.h) > cap:
                 last = (f"the linear stiffness still changed by {err:.2e} (> {rtol:g}) from "

@@ -27,12 +27,14 @@ def _height_class(df: pd.DataFrame) -> pd.Series:
     return rank.map({1.0: 30.0, 2.0: 60.0, 3.0: 110.0}).fillna(60.0)
 
 
-def _save(fig, path: Path, res: pd.DataFrame | None, dpi: int = 100) -> None:
+def _save(fig, path: Path, res: pd.DataFrame | None, dpi: int = 100) -> None:  # noqa: ANN001
     """Save a figure with the run's assumptions stamped under it (a figure travels without its page)."""
+    from canebench.execute.pipeline import ASSUMPTION_SEP
+
     notes: list[str] = []
     if res is not None and "assumptions" in res.columns:
         for a in res["assumptions"].dropna().unique():
-            notes += [x.strip() for x in str(a).split(" | ") if x.strip()]
+            notes += [x.strip() for x in str(a).split(ASSUMPTION_SEP) if x.strip()]
     notes = list(dict.fromkeys(notes))
     if notes:
         fig.subplots_adjust(bottom=min(0.35, fig.subplotpars.bottom + 0.045 * len(notes)))
@@ -292,7 +294,7 @@ def _field_section(run_dir: Path) -> str:
             + field[cols].to_html(index=False, float_format=lambda v: f"{v:.4g}"))
 
 
-def _read_meta(run_dir: Path) -> dict:
+def read_meta(run_dir: Path) -> dict:
     """``run.json``, or a note that it is missing or unreadable (the tables still make a report)."""
     p = run_dir / "run.json"
     if not p.exists():
@@ -343,7 +345,7 @@ def build_report(run_dir: Path) -> Path:
 
         res = pd.DataFrame(columns=RESULT_COLUMNS)
     traces = _read_table(run_dir / "traces.csv")
-    meta = _read_meta(run_dir)
+    meta = read_meta(run_dir)
     # a study's folder holds many configurations per trial: its own sections show them, the
     # one-row-per-trial figures of a run do not apply
     multi = "config_hash" in res.columns and res.config_hash.nunique() > 1

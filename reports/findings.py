@@ -70,7 +70,7 @@ def findings(run_dir: Path) -> list[tuple[str, str, str]]:
             g["abs"] = g.log_ratio.abs()
             by_rank = g.groupby("height_rank")["abs"].median()
             best_rank = g.loc[g.groupby("cane")["abs"].idxmin()].height_rank.value_counts().sort_index()
-            rows.append(("push height", f"median |ln ratio| by height rank (1 = highest): "
+            rows.append(("push height", "median |ln ratio| by height rank (1 = highest): "
                          + ", ".join(f"{int(k)}: {v:.2f}" for k, v in by_rank.items())
                          + "; the best-fitting point of a cane is rank "
                          + ", ".join(f"{int(k)} on {v} canes" for k, v in best_rank.items()), PAPER["height"]))

@@ -13,7 +13,16 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
+from canebench.reports.build import log_ratio_plot  # noqa: E402
+
 MARKERS = ["o", "s", "^", "D", "v", "P"]
+
+
+def _finish(fig, path: Path) -> Path:  # noqa: ANN001
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def _fmt(df: pd.DataFrame) -> str:
@@ -55,22 +64,6 @@ def naive_figure(table: pd.DataFrame, path: Path) -> Path:
     return path
 
 
-def naive_log_ratio_figure(table: pd.DataFrame, path: Path) -> Path:
-    ok = table[table.status == "ok"].sort_values(["bush", "cane", "push_point"])
-    fig, ax = plt.subplots(figsize=(max(8, 0.2 * ok.trial.nunique()), 4))
-    trials = list(dict.fromkeys(ok.trial))
-    for b, g in ok.groupby("backend"):
-        ax.plot([trials.index(t) for t in g.trial], g.log_ratio, "o", ms=3, label=b)
-    ax.axhline(0, color="k", lw=0.6)
-    ax.set_xticks(range(len(trials)), trials, rotation=90, fontsize=6)
-    ax.set_ylabel("ln(k_sim / k_field)")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
-
-
 def morris_figure(indices: pd.DataFrame, path: Path) -> Path:
     """mu* against sigma: a dot per trial, the mean as a cross, the 1:1 line; one panel per engine."""
     ok = indices.dropna(subset=["mu_star"])
@@ -87,10 +80,7 @@ def morris_figure(indices: pd.DataFrame, path: Path) -> Path:
         ax.set_xlabel("mu* (N/mm)"), ax.set_ylabel("sigma (N/mm)")
         ax.set_title(f"{b}: Method of Morris (x = mean)")
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _finish(fig, path)
 
 
 def sweep_figure(best: pd.DataFrame, naive: pd.DataFrame | None, path: Path) -> Path:
@@ -108,10 +98,7 @@ def sweep_figure(best: pd.DataFrame, naive: pd.DataFrame | None, path: Path) -> 
     ax.set_xticks(range(len(trials)), trials, rotation=90, fontsize=6)
     ax.set_ylabel("|ln(k_sim / k_field)|")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _finish(fig, path)
 
 
 def paper_sections(run_dir: Path) -> str:
@@ -122,7 +109,7 @@ def paper_sections(run_dir: Path) -> str:
     if (run_dir / "naive.csv").exists():
         naive = pd.read_csv(run_dir / "naive.csv")
         naive_figure(naive, run_dir / "naive.png")
-        naive_log_ratio_figure(naive, run_dir / "naive_log_ratio.png")
+        log_ratio_plot(naive, run_dir / "naive_log_ratio.png")  # the run report's figure, on the naive rows
         ok = naive[naive.status == "ok"]
         per_b = ok.groupby("backend").log_ratio.agg(
             median_abs=lambda v: v.abs().median(), min="min", max="max", n="size").reset_index()

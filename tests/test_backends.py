@@ -109,30 +109,6 @@ def test_mujoco_paper_protocol_agrees_on_every_bundled_trial(bundled_trials):
     assert rel.max() < AGREE, rel.sort_values().tail()
 
 
-def test_pinocchio_hessian_matches_finite_differences(bundled_trials):
-    """The exact Newton tangent's d2(u.p)/dq2 against central differences of Pinocchio's kinematics."""
-    import pinocchio as pin
-
-    from canebench.backends.pinocchio_backend import PinocchioStatic
-
-    t = next(t for t in bundled_trials if t.id == "b2c2t1")
-    m = PinocchioStatic(build_chain(t.cane, t.push_id, ModelConfig(segments=8)))
-    q = np.random.default_rng(1).normal(scale=0.2, size=m.model.nv)
-    p, _, _, _ = m._eval(q)
-    H = m.hessian_u_p(p)
-
-    def up(qq):
-        pin.framesForwardKinematics(m.model, m.data, qq)
-        return m.u @ m.data.oMf[m.fid].translation
-
-    eps, n = 1e-4, m.model.nv
-    E = np.eye(n) * eps
-    Hfd = np.array([[(up(q + E[i] + E[j]) - up(q + E[i] - E[j]) - up(q - E[i] + E[j]) + up(q - E[i] - E[j]))
-                     / (4 * eps * eps) for j in range(n)] for i in range(n)])
-    # central differences are O(eps^2) = 1e-8 accurate relative to second derivatives of order 0.1
-    assert np.abs(H - Hfd).max() < 1e-6 * max(1.0, np.abs(Hfd).max()) + 1e-7
-
-
 def test_rest_jacobian_equals_pinocchio_frame_jacobian(bundled_trials):
     """linear_stiffness reads the rest Jacobian from the chain; Pinocchio's own must agree."""
     import pinocchio as pin

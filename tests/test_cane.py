@@ -8,7 +8,6 @@ import pytest
 import yaml
 
 from canebench.data.cane import cane_from_dict, load_cane
-from canebench.model.chain import build_chain
 from canebench.model.config import ModelConfig
 from canebench.errors import InputError
 

@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from canebench.cli import main
-from canebench.data.cane import cane_from_dict, cane_to_dict, load_cane
+from canebench.data.cane import cane_from_dict, load_cane
 from canebench.data.dataset import bundled_dataset, load_dataset
 from canebench.errors import InputError, InputWarning
 from canebench.execute.executors import SerialExecutor

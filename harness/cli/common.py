@@ -107,18 +107,10 @@ def trials(a: argparse.Namespace) -> tuple[Path, list]:
 
 
 def assumptions(trials: list, config: Any) -> list[str]:
-    """The assumptions a run rests on, as they are true for this configuration.
+    """The assumptions a run rests on, as they are true for this configuration (all trials, sorted)."""
+    from ..execute.pipeline import assumptions_for
 
-    A dataset's own statement about the modulus (e.g. the generator's "the
-    paper's 4.57 GPa") no longer holds when the configuration sets one.
-    """
-    out = sorted({s for t in trials for s in t.cane.provenance.get("assumptions", [])})
-    if config is None:  # a study sets the modulus itself
-        return [s for s in out if not s.lower().startswith("modulus")]
-    if getattr(config, "modulus_pa", None) is not None:
-        out = [s for s in out if not s.lower().startswith("modulus")]
-        out.append(f"modulus: {config.modulus_pa:.4g} Pa for every cane (model configuration)")
-    return out
+    return sorted({s for t in trials for s in assumptions_for(t, config)})
 
 
 def backends(spec: str) -> tuple[list[str], dict[str, str]]:

@@ -13,20 +13,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main(a: argparse.Namespace) -> int:
-    from canebench.reports.build import build_report
+    from canebench.reports.build import build_report, read_meta
 
     from ..errors import InputError
 
     if not Path(a.run_dir).is_dir():
         raise InputError(a.run_dir, "run_dir", "not a folder")
-    import json
-
     page = build_report(Path(a.run_dir))
-    meta_path = Path(a.run_dir) / "run.json"
-    try:
-        meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
-    except ValueError:
-        meta = {}
+    meta = read_meta(Path(a.run_dir))
     if meta.get("state") not in (None, "complete"):
         print(f"incomplete run ({meta['state']}): {meta.get('jobs_done', '?')} of {meta.get('jobs_total', '?')} jobs "
               f"have results, {meta.get('jobs_missing', '?')} missing. {meta.get('resume', '')}")

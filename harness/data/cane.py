@@ -256,6 +256,14 @@ def _extent_error(cane: CaneDescription, fld: str, where: Location, length: floa
                                                        f"{zmin:.4g}..{zmax:.4g} m")
 
 
+def check_modulus(E: float, src: str, fld: str) -> None:
+    """Warn when a modulus in Pa looks like GPa or MPa (shared by cane files and ``--set``)."""
+    lo, hi = PLAUSIBLE_MODULUS_PA
+    if not (lo <= E <= hi):
+        unit = "; looks like GPa, not Pa" if E < 1e3 else ("; looks like MPa, not Pa" if E < 1e6 else "")
+        warn_input(src, fld, f"{E:.4g} Pa is implausible for green wood ({lo:g}-{hi:g} Pa){unit}")
+
+
 def _check_extent(cane: CaneDescription) -> None:
     """Push points and calipers must lie on the cane: an error at load, not at chain build.
 
@@ -292,11 +300,7 @@ def _check_plausible(cane: CaneDescription) -> None:
             warn_input(src, f"calipers[{i}].diameter", f"{c.diameter:.4g} m is implausible ({lo:g}-{hi:g} m){unit}")
         elif c.diameter < lo:
             warn_input(src, f"calipers[{i}].diameter", f"{c.diameter:.4g} m is implausibly thin ({lo:g}-{hi:g} m)")
-    E = cane.material.flexural_modulus
-    lo, hi = PLAUSIBLE_MODULUS_PA
-    if not (lo <= E <= hi):
-        unit = "; looks like GPa, not Pa" if E < 1e3 else ("; looks like MPa, not Pa" if E < 1e6 else "")
-        warn_input(src, "material.flexural_modulus", f"{E:.4g} Pa is implausible for green wood ({lo:g}-{hi:g} Pa){unit}")
+    check_modulus(cane.material.flexural_modulus, src, "material.flexural_modulus")
     rho = cane.material.density
     if not (PLAUSIBLE_DENSITY[0] <= rho <= PLAUSIBLE_DENSITY[1]):
         warn_input(src, "material.density", f"{rho:.4g} kg/m^3 is implausible for wood "

@@ -99,6 +99,7 @@ def code_fingerprint(extra_module: str | None = None) -> str:
     return h.hexdigest()[:16]
 
 
+@functools.lru_cache(maxsize=4096)  # one per configuration, asked for by every row and trace of it
 def config_hash(config: ModelConfig) -> str:
     """Short hash of a model configuration (labels rows of multi-configuration runs)."""
     return hashlib.sha256(_canonical(config.to_dict()).encode()).hexdigest()[:12]

@@ -83,17 +83,24 @@ class FieldResult:
                  "force_n": float(f)} for i, (x, f) in enumerate(zip(ff.displacement_mm, ff.force_n))]
 
 
-def trial_assumptions(trial: Trial, config: ModelConfig) -> str:
-    """The assumptions behind one row, true for its configuration (joined by :data:`ASSUMPTION_SEP`).
+def assumptions_for(trial: Trial, config: ModelConfig | None) -> list[str]:
+    """The assumptions behind a trial's result, true for its configuration.
 
     A dataset's statement about the modulus no longer holds when the
-    configuration sets one, so it is replaced, never left standing.
+    configuration sets one, so it is replaced, never left standing; with
+    ``config=None`` (a study that varies the modulus itself) it is dropped.
     """
     out = list(trial.cane.provenance.get("assumptions", []))
-    if config.modulus_pa is not None:
+    if config is None or config.modulus_pa is not None:
         out = [a for a in out if not a.lower().startswith("modulus")]
+    if config is not None and config.modulus_pa is not None:
         out.append(f"modulus: {config.modulus_pa:.4g} Pa for every cane (model configuration)")
-    return ASSUMPTION_SEP.join(out)
+    return out
+
+
+def trial_assumptions(trial: Trial, config: ModelConfig) -> str:
+    """:func:`assumptions_for` as one cell, joined by :data:`ASSUMPTION_SEP`."""
+    return ASSUMPTION_SEP.join(assumptions_for(trial, config))
 
 
 def field_fit_for(trial: Trial, window_mm: float | None = None) -> FieldFit | None:

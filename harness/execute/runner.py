@@ -171,6 +171,7 @@ def run_jobs(jobs: list[Job], out_dir: str | Path | None = None, executor: Execu
     if out is not None:
         _write_state(out, run_meta, "running", len(keys), len(done), n_reused, [])
     interrupted = False
+    error: BaseException | None = None
     progress.start(len(keys), n_reused, label)
     try:
         gen = executor.map(todo, timeout_s, out)
@@ -186,15 +187,9 @@ def run_jobs(jobs: list[Job], out_dir: str | Path | None = None, executor: Execu
         finally:
             gen.close()
             progress.close()
-    except BaseException as exc:  # the executor itself failed: say so in run.json, keep what is done
-        if out is not None:
-            res_df, traces, field_df = assemble(jobs, done, fields, with_traces)
-            write_exports(out, RunOutcome(res_df, traces, field_df, len(keys), n_reused, len(done) - n_reused))
-            _write_state(out, {**run_meta, "error": f"{type(exc).__name__}: {exc}"}, "error", len(keys),
-                         len(done), n_reused, [k for k in keys if k not in done])
-        if store is not None:
-            store.close()
-        raise
+    except BaseException as exc:  # the executor itself failed: outputs from what is done, then re-raise
+        error = exc
+    # one ending for every way out: exports and run.json from what is done
     missing = [k for k in keys if k not in done]
     interrupted = interrupted or bool(missing)
     res_df, traces, field_df = assemble(jobs, done, fields, with_traces)
@@ -202,10 +197,13 @@ def run_jobs(jobs: list[Job], out_dir: str | Path | None = None, executor: Execu
                          missing, time.perf_counter() - t0, out)
     if out is not None:
         write_exports(out, outcome)
-        _write_state(out, {**run_meta, "wall_s": outcome.wall_s}, "interrupted" if interrupted else "complete",
-                     len(keys), len(done), n_reused, missing)
+        state = "error" if error is not None else "interrupted" if interrupted else "complete"
+        extra = {"error": f"{type(error).__name__}: {error}"} if error is not None else {"wall_s": outcome.wall_s}
+        _write_state(out, {**run_meta, **extra}, state, len(keys), len(done), n_reused, missing)
     if store is not None:
         store.close()
+    if error is not None:
+        raise error
     return outcome
 
 

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ..data.imu import CHANNELS, RATE_HZ
+from ..data.imu import CHANNELS
 from ..units import GF_TO_N
 
 WINDOW = 20

@@ -190,14 +190,11 @@ class ModelConfig:
 
 def _warn_implausible(changes: Mapping[str, Any], source: str) -> None:
     """The same unit checks as for cane files, for values set on the command line."""
-    from ..data.cane import PLAUSIBLE_DENSITY, PLAUSIBLE_MODULUS_PA
+    from ..data.cane import PLAUSIBLE_DENSITY, check_modulus
     from ..errors import warn_input
 
-    E = changes.get("modulus_pa")
-    if E is not None and not (PLAUSIBLE_MODULUS_PA[0] <= E <= PLAUSIBLE_MODULUS_PA[1]):
-        unit = "; looks like GPa, not Pa" if E < 1e3 else ("; looks like MPa, not Pa" if E < 1e6 else "")
-        warn_input(source, "modulus_pa", f"{E:.4g} Pa is implausible for green wood "
-                                         f"({PLAUSIBLE_MODULUS_PA[0]:g}-{PLAUSIBLE_MODULUS_PA[1]:g} Pa){unit}")
+    if changes.get("modulus_pa") is not None:
+        check_modulus(changes["modulus_pa"], source, "modulus_pa")
     rho = changes.get("density")
     if rho is not None and not (PLAUSIBLE_DENSITY[0] <= rho <= PLAUSIBLE_DENSITY[1]):
         warn_input(source, "density", f"{rho:.4g} kg/m^3 is implausible for wood")

@@ -168,7 +168,6 @@ def example_figure(res: ContactStudyResult, data_dir: Path, path: Path) -> Path:
         axes[0, 0].set_yticks(range(9), CHANNELS, fontsize=6)
         axes[0, 0].set_xlabel("time (s)")
         axes[0, 0].set_title(f"{tid}: detrended accelerations (offset 1 m/s^2 each)", fontsize=9)
-    fr = res.rows[(res.rows.trial == tid) & (res.rows.method == "force")].iloc[0]
     ax_f.plot(rig.displacement_mm, rig.force_gf * GF_TO_N, ".-", ms=3, lw=0.6, color="k")
     ax_f.set_xlabel("displacement (mm)")
     ax_f.set_ylabel("force (N, untared)")
