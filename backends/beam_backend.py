@@ -59,8 +59,10 @@ def rod_spec(chain: Chain, gravity: bool = True) -> rodmod.RodSpec:
     def rho_a(s: np.ndarray) -> np.ndarray:
         return g.density * np.pi * g.diameter(s) ** 2 / 4.0
 
-    return rodmod.polyline_spec(g.points, ei, rho_a, g.poisson_ratio,
+    spec = rodmod.polyline_spec(g.points, ei, rho_a, g.poisson_ratio,
                                 np.asarray(chain.gravity, float) if gravity else np.zeros(3))
+    spec.base_compliance = float(chain.base_compliance)  # root_compliance effect: a base spring
+    return spec
 
 
 class MeshNotConverged(RuntimeError):

@@ -1,4 +1,8 @@
-"""MuJoCo backend: the chain in MJCF with native joint springs and damping.
+"""MuJoCo backend: the chain as an ``MjSpec`` with native joint springs and damping.
+
+The model is built by :func:`canebench.export.mjcf.chain_spec`, the builder
+``canebench export`` writes as MJCF, so an exported file is the model
+simulated here (apart from the probe actuator and collision settings).
 
 Configuration, by protocol:
 
@@ -22,78 +26,29 @@ from __future__ import annotations
 from typing import Any
 
 import mujoco
-import numpy as np
 
+from canebench.export.mjcf import chain_spec
 from canebench.model.chain import Chain
-from canebench.model.geometry import frame_with_x
 from canebench.probe.protocol import Protocol
 
 from .base import DynamicBackend, Simulation
 
 
-def _quat(R: np.ndarray) -> np.ndarray:
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R).ravel())
-    return q
-
-
-def _f(v: Any) -> str:
-    return " ".join(repr(float(x)) for x in np.atleast_1d(v))
-
-
 def chain_to_mjcf(chain: Chain, dt: float, integrator: str, native_pid: bool, gains: tuple[float, float, float]) -> str:
-    """MJCF text of ``chain``; the probe is a ``pid`` (native) or ``motor`` actuator."""
-    lines = []
-    depth = 0
-    for j in range(chain.n_links):
-        R, p = chain.relative_pose(j)
-        ind = "  " * (depth + 2)
-        l, r = chain.lengths[j], chain.diameters[j] / 2
-        lines.append(f'{ind}<body name="link{j}" pos="{_f(p)}" quat="{_f(_quat(R))}">')
-        axes = [("1 0 0", "x", chain.stiffness[j]), ("0 1 0", "y", chain.stiffness[j])]
-        if chain.twist_stiffness is not None:
-            axes.append(("0 0 1", "z", chain.twist_stiffness[j]))
-        for ax, name, k in axes:
-            lines.append(f'{ind}  <joint name="j{j}{name}" type="hinge" axis="{ax}" '
-                         f'stiffness="{_f(k)}" damping="{_f(chain.damping)}" springref="0"/>')
-        lines.append(f'{ind}  <inertial pos="0 0 {_f(l / 2)}" mass="{_f(chain.masses[j])}" '
-                     f'diaginertia="{_f(chain.inertias[j])}"/>')
-        lines.append(f'{ind}  <geom type="capsule" fromto="0 0 0 0 0 {_f(l)}" size="{_f(r)}" '
-                     f'contype="0" conaffinity="0" mass="0"/>')
-        if j == chain.push_link:
-            lines.append(f'{ind}  <site name="push" pos="{_f(chain.local(j, chain.push_point))}"/>')
-        depth += 1
-    for j in reversed(range(chain.n_links)):
-        lines.append("  " * (j + 2) + "</body>")
-    kp, ki, kd = gains
-    if native_pid:
-        act = (f'<pid name="probe" site="push" refsite="probe_ref" gear="1 0 0 0 0 0" '
-               f'kp="{_f(kp)}" ki="{_f(ki)}" kv="{_f(kd)}" input="pos"/>')
-    else:
-        act = '<motor name="probe" site="push" refsite="probe_ref" gear="1 0 0 0 0 0"/>'
-    g = _f(chain.gravity)
-    ref_quat = _f(_quat(frame_with_x(chain.direction)))
-    return "\n".join([
-        '<mujoco model="cane">',
-        '  <compiler angle="radian" autolimits="true"/>',
-        f'  <option timestep="{_f(dt)}" integrator="{integrator}" solver="Newton" gravity="{g}">',
-        '    <flag contact="disable"/>',
-        '  </option>',
-        '  <worldbody>',
-        f'    <site name="probe_ref" pos="{_f(chain.push_point)}" quat="{ref_quat}"/>',
-        *lines,
-        '  </worldbody>',
-        f'  <actuator>{act}</actuator>',
-        '</mujoco>',
-    ])
+    """MJCF text of the model this backend simulates (for inspection; the backend compiles the spec)."""
+    spec = chain_spec(chain, dt=dt, integrator=integrator, probe="pid" if native_pid else "motor", gains=gains)
+    spec.compile()
+    return spec.to_xml()
 
 
 class MujocoSimulation(Simulation):
     def __init__(self, chain: Chain, proto: Protocol, native: bool, integrator: str) -> None:
         self.native_pid = native
         self.dt = proto.dt
-        self.xml = chain_to_mjcf(chain, proto.dt, integrator, native, (proto.kp, proto.ki, proto.kd))
-        self.m = mujoco.MjModel.from_xml_string(self.xml)
+        # the same MjSpec builder `canebench export` writes as MJCF
+        self.spec = chain_spec(chain, dt=proto.dt, integrator=integrator, probe="pid" if native else "motor",
+                               gains=(proto.kp, proto.ki, proto.kd))
+        self.m = self.spec.compile()
         self.d = mujoco.MjData(self.m)
         mujoco.mj_forward(self.m, self.d)
         self._stepped = True  # state changed since the last read: recompute kinematics

@@ -188,6 +188,11 @@ class RodSpec:
         its piecewise-constant segment directions): straight segments with a
         kink at every vertex, integrated with moment-matched coefficients
         (module docstring). Build it with :func:`polyline_spec`.
+    base_compliance : float
+        Rotational compliance c (rad/(N m)) of the base about both axes
+        perpendicular to the rest tangent there (a root that is not a rigid
+        clamp): the base rotates by the rotation vector c (m0 - (m0.t0) t0),
+        with m0 the moment the rod exerts on its base; 0 is a clamp.
     """
 
     length: float
@@ -198,6 +203,7 @@ class RodSpec:
     base: Array = field(default_factory=lambda: np.zeros(3))
     gravity: Array = field(default_factory=lambda: np.zeros(3))
     polyline: Array | None = None
+    base_compliance: float = 0.0
 
 
 def polyline_spec(points: Array, ei: Callable[[Array], Array],
@@ -378,6 +384,9 @@ class Rod:
         self._elements_weightless = self._stage_table(np.zeros_like(n_prime))
         self._u = tuple(self.u.tolist())
         self._base = tuple(np.asarray(spec.base, float).tolist())
+        self._c_root = float(spec.base_compliance)
+        tb = np.asarray(spec.tangent(np.zeros(1)), float).reshape(-1, 3)[0]
+        self._t_base = tuple((tb / np.linalg.norm(tb)).tolist())
         self.m0 = np.zeros(3)
         self.F = 0.0
         #: Newton updates (chord and full) per solve, and shots per solve
@@ -435,8 +444,17 @@ class Rod:
         F = float(F)
         Fu = [F * c for c in self._u]
         r = list(self._base)
-        q = [1.0, 0.0, 0.0, 0.0]
         m = [float(c) for c in m0]
+        q = [1.0, 0.0, 0.0, 0.0]
+        if self._c_root:
+            # base spring: rotation vector c (m - (m.t) t), t the rest tangent at the base
+            tx, ty, tz = self._t_base
+            mt = m[0] * tx + m[1] * ty + m[2] * tz
+            th = [self._c_root * (m[0] - mt * tx), self._c_root * (m[1] - mt * ty), self._c_root * (m[2] - mt * tz)]
+            a = math.sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2])
+            if a > 0:
+                sa = math.sin(0.5 * a) / a
+                q = [math.cos(0.5 * a), sa * th[0], sa * th[1], sa * th[2]]
         n = [f if weightless else w + f for w, f in zip(self.weight.tolist(), Fu)]
         traj = [tuple(r)] if keep else None
         r_probe = None

@@ -319,6 +319,10 @@ def _study_sections(run_dir: Path) -> str:
         from canebench.studies.modulus import modulus_section_html
 
         parts.append(modulus_section_html(run_dir))
+    if (run_dir / "discovery.json").exists():
+        from canebench.reports.discovery import section as discovery_section
+
+        parts.append(discovery_section(run_dir))
     return "".join(parts)
 
 

@@ -85,18 +85,17 @@ def test_bundled_descriptions_load_and_are_labelled_synthetic(bundled_trials):
 
 
 def test_config_overrides_are_typed_and_validated():
-    from canebench.model.effects import EFFECTS
-
-    EFFECTS.add("test_a", object())
-    EFFECTS.add("test_b", object())
-    try:
-        c = ModelConfig().with_overrides({"modulus_pa": "3e9", "segments": "12", "effects": "test_a,test_b"})
-        assert c.modulus_pa == 3e9 and c.segments == 12 and c.effects == ("test_a", "test_b")
-    finally:
-        EFFECTS.remove("test_a")
-        EFFECTS.remove("test_b")
+    c = ModelConfig().with_overrides({"modulus_pa": "3e9", "segments": "12",
+                                      "effects": "modulus_scale(scale=2), root_compliance(k_root=5)"})
+    assert c.modulus_pa == 3e9 and c.segments == 12
+    assert [(e.name, dict(e.params)) for e in c.effects] == [("modulus_scale", {"scale": 2.0}),
+                                                            ("root_compliance", {"k_root": 5.0})]
     with pytest.raises(InputError, match="effects"):
         ModelConfig().with_overrides({"effects": "test_a"})
+    with pytest.raises(InputError, match="k_roo"):
+        ModelConfig().with_overrides({"effects": "root_compliance(k_roo=5)"})
+    with pytest.raises(InputError, match="k_root"):
+        ModelConfig().with_overrides({"effects": "root_compliance(k_root=-5)"})
     assert ModelConfig().with_overrides({"segments": "none"}).segments is None
     with pytest.raises(InputError, match="diameter_factor"):
         ModelConfig().with_overrides({"diameter_factor": "1.5"})

@@ -16,6 +16,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     be.add_argument("--n-jobs", type=int, default=1000, help="jobs for --runner (default 1000)")
     be.add_argument("--memory", action="store_true",
                     help="peak memory of Pinocchio's linear stiffness at 20, 160 and 320 links")
+    be.add_argument("--export", action="store_true",
+                    help="time an exported population (--population N, default 100) against one single export")
+    be.add_argument("--population", type=int, default=100, help="canes for --export (default 100)")
     be.add_argument("--backends", default="mujoco", help="comma-separated; MuJoCo is always included as the baseline")
     be.add_argument("--steps", type=int, default=None, help="protocol steps per trial (default: full trial)")
     be.set_defaults(fn=main)
@@ -30,6 +33,8 @@ def main(a: argparse.Namespace) -> int:
         bench.bench_engines(trials=a.trials, backends=None if a.backends == "mujoco" else a.backends.split(","))
     elif a.memory:
         bench.bench_memory()
+    elif a.export:
+        bench.bench_export(population=a.population)
     elif a.runner:
         bench.bench_runner(n_jobs=a.n_jobs)
     else:

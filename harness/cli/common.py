@@ -33,6 +33,8 @@ def add_model_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("model")
     g.add_argument("--preset", default="default", help="named model configuration (canebench presets)")
     g.add_argument("--set", action="append", metavar="KEY=VALUE", help="model configuration override (repeatable)")
+    g.add_argument("--model", metavar="FILE", help="model file (e.g. the discovery workflow's model.yaml): a preset "
+                                                  "plus fitted effects; replaces --preset, --set applies on top")
 
 
 def add_data_options(p: argparse.ArgumentParser) -> None:
@@ -77,10 +79,15 @@ def model_config(a: argparse.Namespace) -> Any:
     from ..model.presets import PRESETS
     from ..registry import UnknownName
 
-    try:
-        base = PRESETS[a.preset]
-    except UnknownName as exc:
-        raise InputError("--preset", "preset", str(exc)) from None
+    if getattr(a, "model", None):
+        from ..model.modelfile import load_model_file
+
+        base = load_model_file(a.model)
+    else:
+        try:
+            base = PRESETS[a.preset]
+        except UnknownName as exc:
+            raise InputError("--preset", "preset", str(exc)) from None
     return base.with_overrides(parse_assignments(a.set))
 
 

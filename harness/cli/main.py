@@ -7,8 +7,9 @@ import sys
 
 from ..errors import CanebenchError, InputWarning
 from . import agree, backends, bench, converge, generate, report, run, study
+from . import discover, export
 
-COMMANDS = (run, report, agree, converge, study, backends, generate, bench)
+COMMANDS = (run, report, agree, converge, study, backends, generate, bench, export, discover)
 
 
 def build_parser() -> argparse.ArgumentParser:

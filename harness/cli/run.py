@@ -71,7 +71,7 @@ def _run(a: argparse.Namespace, out: Path) -> int:
     for s in assumptions:
         print(f"  assumption: {s}")
     t0 = time.perf_counter()
-    fields = field_stage(trials, proto.fit_window_mm)
+    fields = field_stage(trials, proto.fit_window_mm, config)
     jobs = make_jobs(trials, usable, proto, config, fields, a.max_steps)
     meta = provenance(usable, proto, config, {
         "command": " ".join(sys.argv), "dataset": str(data_dir.resolve()),

@@ -109,10 +109,13 @@ def field_fit_for(trial: Trial, window_mm: float | None = None) -> FieldFit | No
     return extract_field_stiffness(read_rig_csv(trial.csv), window_mm=window_mm)
 
 
-def field_stage(trials: Iterable[Trial], window_mm: float | None = None) -> dict[str, FieldResult]:
+def field_stage(trials: Iterable[Trial], window_mm: float | None = None,
+                config: ModelConfig | None = None) -> dict[str, FieldResult]:
     """Field stiffness of every trial, by trial id (a bad CSV is a reason, not a crash).
 
-    ``window_mm`` must be the protocol's ``fit_window_mm`` so both sides of a score use one window.
+    ``window_mm`` must be the protocol's ``fit_window_mm`` so both sides of a score use one window;
+    a ``config`` whose effects shorten a trial's window (an obstruction onset)
+    shortens it here too, as :func:`run_job` does for the simulation.
 
     Raises
     ------
@@ -126,7 +129,8 @@ def field_stage(trials: Iterable[Trial], window_mm: float | None = None) -> dict
             continue
         if t.csv is not None and not t.csv.exists():
             raise InputError(str(t.csv), "<file>", f"rig CSV of trial {t.id} not found")
-        ff = field_fit_for(t, window_mm)
+        win = config.fit_window_mm(t.cane.id, t.id, window_mm) if config is not None else window_mm
+        ff = field_fit_for(t, win)
         out[t.id] = FieldResult(t, ff, ff.reason if ff is not None else "no field trial")
     return out
 
@@ -144,7 +148,9 @@ def make_jobs(trials: list[Trial], backends: list[str], proto: Protocol,
     labels : list of dict, optional
         Per-trial labels copied into each row (a study's sample index...).
     """
-    fields = fields if fields is not None else field_stage(trials, proto.fit_window_mm)
+    if fields is None:
+        one = configs if isinstance(configs, ModelConfig) else None
+        fields = field_stage(trials, proto.fit_window_mm, one)
     if isinstance(configs, ModelConfig):
         configs = [configs] * len(trials)
     if len(configs) != len(trials):
@@ -157,6 +163,7 @@ def make_jobs(trials: list[Trial], backends: list[str], proto: Protocol,
     for i, (t, cfg) in enumerate(zip(trials, configs)):
         n = fields[t.id].n_steps(proto, max_steps)
         lab = labels[i] if labels else {}
+        cfg = cfg.localized(t.cane.id, t.id)  # per-cane/per-trial effect values: only this trial's
         for b in backends:
             jobs.append(Job(t, b, versions[b], proto, cfg, n, dict(lab), classes[b], modules[b]))
     return jobs
@@ -179,7 +186,11 @@ def run_job(job: Job) -> JobResult:
         return JobResult(job.key, row)
     backend = job.backend_cls() if job.backend_cls is not None else get_backend(job.backend)
     tr = run_probe(backend, chain, job.protocol, job.n_steps)
-    win = job.protocol.fit_window_mm
+    win = cfg.fit_window_mm(t.cane.id, t.id, job.protocol.fit_window_mm)
+    if cfg.effects and tr.status == "ok" and tr.force:
+        # effects on what the rig records (rig compliance): the slope is fit to the recorded trace
+        x, f = cfg.applied_effects(t.cane.id, t.id).measured(np.array(tr.displacement), np.array(tr.force))
+        tr.displacement, tr.force = [float(v) for v in x], [float(v) for v in f]
     fit = tr.fit(win * 1e-3 if win is not None else None) if tr.status == "ok" else None
     status, reason = tr.status, tr.reason
     if status == "ok" and fit is None:

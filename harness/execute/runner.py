@@ -26,6 +26,7 @@ import pandas as pd
 
 from .executors import DEFAULT_TIMEOUT_S, Executor, LocalExecutor
 from .jobs import Job, JobResult
+from ..model.config import ModelConfig
 from .pipeline import FieldResult, field_stage, results_table, score, trace_rows
 from .progress import Progress
 from .store import Store, atomic_csv, atomic_text
@@ -154,7 +155,11 @@ def run_jobs(jobs: list[Job], out_dir: str | Path | None = None, executor: Execu
     t0 = time.perf_counter()
     executor = executor or LocalExecutor()
     progress = progress or Progress()
-    fields = fields if fields is not None else field_stage((j.trial for j in jobs), jobs[0].protocol.fit_window_mm if jobs else None)
+    if fields is None:  # each trial's field fit under its own job's configuration (effects may shorten its window)
+        fields = {}
+        for j in jobs:
+            if j.trial.id not in fields:
+                fields.update(field_stage([j.trial], j.protocol.fit_window_mm, j.config))
     out = Path(out_dir).resolve() if out_dir is not None else None
     store = Store.in_folder(out, fresh=fresh) if out is not None else None
     keys = list(dict.fromkeys(j.key for j in jobs))
@@ -237,6 +242,6 @@ def run_trials(trials: list, backends: list[str], proto: Any, config: Any, out_d
     """
     from .pipeline import make_jobs
 
-    fields = field_stage(trials, proto.fit_window_mm)
+    fields = field_stage(trials, proto.fit_window_mm, config if isinstance(config, ModelConfig) else None)
     job_list = make_jobs(trials, backends, proto, config, fields, max_steps)
     return run_jobs(job_list, out_dir, executor or LocalExecutor(jobs), fields=fields, **kw)

@@ -45,10 +45,17 @@ class RodGeometry:
     modulus: float
     density: float
     poisson_ratio: float
+    #: effects that change the diameter profile (base flare...), applied before the floor
+    effects: Any = None
+    #: rotational compliance of the base (rad/(N m)) about both bending axes (root_compliance)
+    base_compliance: float = 0.0
 
     def diameter(self, s: np.ndarray) -> np.ndarray:
         s = np.asarray(s, float)
-        return np.maximum(self.d_centroid + self.slope * (s - self.s_centroid), self.min_diameter)
+        d = self.d_centroid + self.slope * (s - self.s_centroid)
+        if self.effects is not None:
+            d = self.effects.diameter(s, d)
+        return np.maximum(d, self.min_diameter)
 
 
 @dataclass(frozen=True)
@@ -101,6 +108,10 @@ class Chain:
     meta: dict[str, Any] = field(default_factory=dict)
     rod: RodGeometry | None = None
     twist_stiffness: np.ndarray | None = None
+    #: rotational compliance (rad/(N m)) of the base about both bending axes
+    #: (root_compliance effect), already in series in ``stiffness[0]``; the
+    #: beam reference reads it for its base spring
+    base_compliance: float = 0.0
 
     @property
     def n_links(self) -> int:
@@ -151,7 +162,7 @@ class Chain:
             h.update(np.ascontiguousarray(np.round(a, 12)).tobytes())
         if self.twist_stiffness is not None:
             h.update(np.ascontiguousarray(np.round(self.twist_stiffness, 12)).tobytes())
-        h.update(json.dumps([self.damping, self.push_link]).encode())
+        h.update(json.dumps([self.damping, self.push_link, self.base_compliance]).encode())
         return h.hexdigest()[:12]
 
 
@@ -222,6 +233,8 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
     curve = cane_curve(cane, config)
     pp = cane.push_point(push_id)
     pidx = cane.push_points.index(pp)
+    trial_id = f"{cane.id}t{pp.id}"  # as the dataset names trials (b1c2t3)
+    fx = config.applied_effects(cane.id, trial_id) if config.effects else None
     s_push = resolve_s(curve, pp.where, src, f"push_points[{pidx}]")
     fixed = (s_push,) if config.node_at_push else ()
     if config.discretization == "uniform":
@@ -236,16 +249,21 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
     fit = fit_diameter(cal_s, cal_d, config.diameter_factor)
     mid_s = 0.5 * (nodes_s[:-1] + nodes_s[1:])  # paper: diameter at the middle of each link
     diam_raw = fit(mid_s)
+    if fx is not None and fx.changes_diameter:
+        diam_raw = fx.diameter(mid_s, diam_raw)
     clamped = int(np.sum(diam_raw < config.min_diameter_m))
     diam = np.maximum(diam_raw, config.min_diameter_m)
 
     E = config.modulus_pa if config.modulus_pa is not None else cane.material.flexural_modulus
+    if fx is not None:
+        E = fx.modulus(E)
     rho = config.density if config.density is not None else cane.material.density
     damping = config.damping if config.damping is not None else cane.material.joint_damping
 
     link = int(np.clip(np.searchsorted(nodes_s, s_push, side="left") - 1, 0, len(nodes_s) - 2))
     point = curve.at(s_push)
-    u = probe_direction(np.array(pp.direction), curve.tangent(s_push), config.probe_angle_deg)
+    pitch = config.probe_angle_deg + (fx.probe_pitch_deg() if fx is not None else 0.0)
+    u = probe_direction(np.array(pp.direction), curve.tangent(s_push), pitch)
 
     warnings = []
     if clamped:
@@ -264,8 +282,10 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
         "warnings": warnings,
         "synthetic": bool(cane.provenance.get("synthetic", False)),
     }
+    c_root = fx.root_compliance() if fx is not None else 0.0
     rod = RodGeometry(curve.points, curve.s, fit.s_centroid, fit.d_centroid, fit.factor * fit.slope,
-                      config.min_diameter_m, float(E), float(rho), config.poisson_ratio)
+                      config.min_diameter_m, float(E), float(rho), config.poisson_ratio,
+                      fx if fx is not None and fx.changes_diameter else None, c_root)
     ctx = StiffnessContext(nodes_s, lambda s: rod.modulus * np.pi * rod.diameter(s) ** 4 / 64.0)
     chain = assemble_chain(nodes, diam, E, rho, damping, config.stiffness_formula, link, point, u,
                            config.gravity, meta, src, ctx)
@@ -275,7 +295,13 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
         gj = lambda s: rod.modulus * np.pi * rod.diameter(s) ** 4 / 64.0 / (1.0 + rod.poisson_ratio)  # noqa: E731
         twist = joint_stiffness(config.stiffness_formula, chain.modulus * np.pi * diam**4 / 64.0
                                 / (1.0 + config.poisson_ratio), chain.lengths, StiffnessContext(nodes_s, gj))
-    return dataclasses.replace(chain, rod=rod, twist_stiffness=twist)
+    if c_root > 0:
+        # root_compliance: a joint pair at the base about the same two axes as the
+        # first pair, in series with it, is exactly one pair of springs 1/(1/K0 + c)
+        K = chain.stiffness.copy()
+        K[0] = 1.0 / (1.0 / K[0] + c_root)
+        chain = dataclasses.replace(chain, stiffness=K)
+    return dataclasses.replace(chain, rod=rod, twist_stiffness=twist, base_compliance=c_root)
 
 
 def assemble_chain(nodes: np.ndarray, diameters: np.ndarray, modulus: float, density: float, damping: float,

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from ..errors import InputError
+from .effects import AppliedEffects, EffectSpec, split_effects_text
 
 
 
@@ -73,8 +74,11 @@ class ModelConfig:
         from GJ = EI / (1 + nu) on the dual segment). Off in the paper; on, the
         beam-consistent chain converges to the beam with torsion (nu =
         ``poisson_ratio``) instead of to a torsion-rigid rod.
-    effects : tuple of str
-        Names of extra physical effects (pluggable; empty reproduces the paper).
+    effects : tuple of EffectSpec
+        Extra physical effects with their parameters
+        (:mod:`canebench.model.effects`; empty reproduces the paper). Given
+        as text ``name`` / ``name(key=value, ...)``, dicts (a model file) or
+        :class:`~canebench.model.effects.EffectSpec`.
     """
 
     modulus_pa: float | None = None
@@ -97,7 +101,7 @@ class ModelConfig:
     beam_rtol: float = 1.0e-4
     beam_max_elements: int = 3072
     twist_joint: bool = False
-    effects: tuple[str, ...] = field(default_factory=tuple)
+    effects: tuple[EffectSpec, ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:
         # one number, one key: 3000000000 and 3e9 are the same modulus
@@ -105,8 +109,15 @@ class ModelConfig:
             v = getattr(self, f.name)
             if isinstance(v, int) and not isinstance(v, bool) and "float" in str(f.type):
                 object.__setattr__(self, f.name, float(v))
-        if isinstance(self.effects, list):
-            object.__setattr__(self, "effects", tuple(self.effects))
+        effects = self.effects
+        if isinstance(effects, (str, EffectSpec, dict)):
+            effects = [effects]
+        if isinstance(effects, str):
+            effects = split_effects_text(effects)
+        object.__setattr__(self, "effects", tuple(
+            e for item in effects
+            for e in ([EffectSpec.parse(x) for x in split_effects_text(item)] if isinstance(item, str)
+                      else [EffectSpec.parse(item)])))
         self.validate()
 
     def validate(self, source: str = "model configuration") -> None:
@@ -143,13 +154,13 @@ class ModelConfig:
             raise InputError(source, "beam_rtol", f"must be in (0, 0.1), got {self.beam_rtol!r}")
         if self.beam_max_elements < self.beam_elements:
             raise InputError(source, "beam_max_elements", "must be >= beam_elements")
-        from .effects import EFFECTS
         from .stiffness import FORMULAS  # late: the formulas module registers on import
 
-        unknown = [e for e in self.effects if e not in EFFECTS]
-        if unknown:
-            raise InputError(source, "effects", f"unknown physical effect(s) {', '.join(unknown)}; registered: "
-                                                f"{', '.join(EFFECTS) or 'none yet'}")
+        names = [e.name for e in self.effects]
+        if len(set(names)) != len(names):
+            raise InputError(source, "effects", f"an effect is listed twice: {', '.join(names)}")
+        for e in self.effects:
+            e.validate(source)
 
         if self.stiffness_formula not in FORMULAS:
             import difflib
@@ -183,9 +194,28 @@ class ModelConfig:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
-        d["effects"] = list(self.effects)
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["effects"] = [e.to_dict() for e in self.effects]
         return d
+
+    def localized(self, cane_id: str, trial_id: str) -> "ModelConfig":
+        """This configuration as one trial sees it: per-cane and per-trial effect
+        values resolved, every other cane's dropped (so a job's key depends
+        only on what acts on its trial)."""
+        if not any(e.local for e in self.effects):
+            return self
+        return dataclasses.replace(self, effects=tuple(e.localized(cane_id, trial_id) for e in self.effects))
+
+    def applied_effects(self, cane_id: str | None = None, trial_id: str | None = None) -> AppliedEffects:
+        """Instances of this configuration's effects for one trial."""
+        return AppliedEffects.for_trial(self.effects, cane_id, trial_id)
+
+    def fit_window_mm(self, cane_id: str | None, trial_id: str | None, default: float | None = None) -> float | None:
+        """The fit window of one trial: the protocol's, shortened by any effect (obstruction onset)."""
+        w = self.applied_effects(cane_id, trial_id).fit_window_mm() if self.effects else None
+        if w is None:
+            return default
+        return w if default is None else min(w, default)
 
 
 def _warn_implausible(changes: Mapping[str, Any], source: str) -> None:
@@ -216,7 +246,7 @@ def _coerce(raw: Any, hint: Any, source: str, key: str) -> Any:
         return raw
     text = raw.strip()
     if typing.get_origin(hint) is tuple:
-        return tuple(s.strip() for s in text.split(",") if s.strip())
+        return tuple(split_effects_text(text))
     args = typing.get_args(hint)
     optional = type(None) in args
     if optional and text.lower() in ("none", "null", ""):

@@ -1,15 +1,398 @@
 """Physical effects a model configuration may add (``ModelConfig.effects``).
 
-The registry is empty until the discovery workflow brings its library of
-candidate effects; until then any named effect is refused rather than
-silently ignored (an unknown name would otherwise be recorded in the
-provenance of a run it never touched).
+One base class, :class:`Effect`, with hooks that do nothing by default
+(PyElastica's ``NoForces`` is the model): an effect overrides only the hooks
+where it acts. Every hook is applied in one place of the pipeline, so an
+effect reaches every engine, not one:
+
+=====================  =============================================  ===========================
+hook                   where it is applied                            reaches
+=====================  =============================================  ===========================
+``modulus``            :func:`canebench.model.chain.build_chain`      every chain and the beam
+``diameter``           chain link diameters and the beam's EI(s)      every chain and the beam
+``root_compliance``    series spring on the base joint pair; the      every chain and the beam
+                       beam's base spring (``Chain.base_compliance``)
+``probe_pitch_deg``    the probe direction of the chain               every backend
+``measured``           the simulated trace before its slope is fit    every backend
+                       (:func:`canebench.execute.pipeline.run_job`)
+``fit_window_mm``      the field fit *and* the simulated fit of one   every backend
+                       trial (obstruction: score only up to onset)
+=====================  =============================================  ===========================
+
+An effect in a configuration is an :class:`EffectSpec`: its name, global
+parameter values, and values local to a cane or a trial (``local``), e.g.
+the per-trial obstruction onsets. Third parties add effects through the
+``canebench.effects`` entry-point group (a subclass of :class:`Effect`).
 """
 
 from __future__ import annotations
 
-from typing import Any
+import math
+import re
+import warnings
+from dataclasses import dataclass, field
+from importlib import metadata
+from typing import Any, ClassVar, Mapping
 
+import numpy as np
+
+from ..errors import InputError
 from ..registry import Registry
 
-EFFECTS: Registry[Any] = Registry("physical effect")
+ENTRY_POINT_GROUP = "canebench.effects"
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A named effect parameter.
+
+    Attributes
+    ----------
+    unit : str
+    low, high : float
+        Search bounds of the discovery workflow (physically plausible range).
+    null : float
+        The value at which the effect does nothing (``inf`` for a spring in series).
+    log : bool
+        Searched on a log scale (positive quantities spanning decades).
+    doc : str
+    """
+
+    unit: str
+    low: float
+    high: float
+    null: float
+    log: bool = False
+    doc: str = ""
+
+
+class Effect:
+    """Base class of a physical effect: every hook leaves the model unchanged.
+
+    Subclasses set :attr:`name`, :attr:`parameters` and override hooks.
+    An instance holds one set of parameter values (``effect.p["k_root"]``).
+    """
+
+    name: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+    #: where it acts: material, geometry, base, probe, measurement, trial
+    where: ClassVar[str] = ""
+    parameters: ClassVar[dict[str, Parameter]] = {}
+    #: scopes the discovery workflow may fit: global, per_cane, per_trial
+    scopes: ClassVar[tuple[str, ...]] = ("global",)
+
+    def __init__(self, **params: float) -> None:
+        unknown = set(params) - set(self.parameters)
+        if unknown:
+            raise KeyError(f"unknown parameter(s) {sorted(unknown)} of effect {self.name!r}; "
+                           f"known: {sorted(self.parameters)}")
+        self.p = {k: float(params.get(k, par.null)) for k, par in self.parameters.items()}
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({', '.join(f'{k}={v:.4g}' for k, v in self.p.items())})"
+
+    # ----------------------------------------------------------- hooks
+    def modulus(self, E: float) -> float:
+        """Flexural modulus (Pa) the model uses, given the stated one."""
+        return E
+
+    def diameter(self, s: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """Diameter (m) at arc lengths ``s`` (m from the base), given the caliper fit's ``d``."""
+        return d
+
+    def root_compliance(self) -> float:
+        """Rotational compliance (rad/(N m)) at the base about both bending axes, in series with the clamp."""
+        return 0.0
+
+    def probe_pitch_deg(self) -> float:
+        """Extra pitch of the probe from perpendicular (degrees, positive up)."""
+        return 0.0
+
+    def measured(self, x_m: np.ndarray, f_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What the rig records for a cane pushed by ``x_m`` with force ``f_n``."""
+        return x_m, f_n
+
+    def fit_window_mm(self) -> float | None:
+        """Score this trial only over its first ... mm of contact (None: all of it)."""
+        return None
+
+
+EFFECTS: Registry[type[Effect]] = Registry("physical effect")
+
+
+def register_effect(cls: type[Effect], tags: tuple[str, ...] = ()) -> type[Effect]:
+    EFFECTS.add(cls.name, cls, (cls.where, *tags), cls.summary)
+    return cls
+
+
+# --------------------------------------------------------------- the library
+
+
+class ModulusScale(Effect):
+    name = "modulus_scale"
+    summary = "E differs from the stated modulus (season, variety): E_true = scale x E_stated"
+    where = "material"
+    parameters = {"scale": Parameter("1", 0.2, 5.0, 1.0, True, "E_true / E_stated")}
+    scopes = ("global", "per_cane")
+
+    def modulus(self, E: float) -> float:
+        return E * self.p["scale"]
+
+
+class RootCompliance(Effect):
+    name = "root_compliance"
+    summary = "the base is not a rigid clamp: a rotational spring k_root about both bending axes"
+    where = "base"
+    parameters = {"k_root": Parameter("N m/rad", 0.3, 3000.0, math.inf, True,
+                                      "rotational stiffness of the root about each bending axis")}
+
+    def root_compliance(self) -> float:
+        return 1.0 / self.p["k_root"]
+
+
+class RigCompliance(Effect):
+    name = "rig_compliance"
+    summary = "the rig flexes: a spring k_rig in series with the probe (the rig records its own travel)"
+    where = "measurement"
+    parameters = {"k_rig": Parameter("N/m", 20.0, 1.0e5, math.inf, True, "stiffness of the rig in series")}
+
+    def measured(self, x_m: np.ndarray, f_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.asarray(x_m) + np.asarray(f_n) / self.p["k_rig"], f_n
+
+
+class BaseFlare(Effect):
+    """d(s) = d_fit(s) + excess exp(-s / length).
+
+    An absolute thickening (not a fraction of the fitted diameter): a root
+    collar is similar in size on thin and thick canes, so it stiffens thin
+    canes far more, which is what the field data shows. Calipers taken at
+    the push points cannot see it.
+    """
+
+    name = "base_flare"
+    summary = ("the cane thickens toward the base beyond the linear caliper fit: "
+               "d(s) = d_fit(s) + excess_mm exp(-s / length_mm)")
+    where = "geometry"
+    parameters = {"excess_mm": Parameter("mm", 0.0, 25.0, 0.0, False, "extra diameter at the ground"),
+                  "length_mm": Parameter("mm", 20.0, 600.0, 150.0, True, "e-folding length of the excess")}
+
+    def diameter(self, s: np.ndarray, d: np.ndarray) -> np.ndarray:
+        return d + 1e-3 * self.p["excess_mm"] * np.exp(-np.asarray(s) / (1e-3 * self.p["length_mm"]))
+
+
+class ProbeMisalignment(Effect):
+    name = "probe_misalignment"
+    summary = "the probe is pitched from perpendicular to the cane by angle_deg (positive up)"
+    where = "probe"
+    parameters = {"angle_deg": Parameter("deg", -45.0, 45.0, 0.0, False, "probe pitch")}
+
+    def probe_pitch_deg(self) -> float:
+        return self.p["angle_deg"]
+
+
+class Obstruction(Effect):
+    """A second body engages partway through some trials (an elbow up in the
+    force): those trials are scored only up to the onset, in the field and in
+    every simulation (truncation, as the paper does for contacts)."""
+
+    name = "obstruction"
+    summary = "in some trials a second body engages partway (elbow): scored only up to onset_mm of contact"
+    where = "trial"
+    parameters = {"onset_mm": Parameter("mm", 1.0, 200.0, math.inf, False,
+                                        "displacement after contact at which the second body engages")}
+    scopes = ("per_trial",)
+
+    def fit_window_mm(self) -> float | None:
+        v = self.p["onset_mm"]
+        return v if math.isfinite(v) else None
+
+
+for _cls in (ModulusScale, RootCompliance, RigCompliance, BaseFlare, ProbeMisalignment, Obstruction):
+    register_effect(_cls, ("builtin",))
+
+_loaded = False
+
+
+def load_entry_points() -> None:
+    """Register third-party effects (entry-point group ``canebench.effects``) once."""
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name in EFFECTS:
+            continue
+        try:
+            cls = ep.load()
+        except Exception as exc:  # a broken plugin is skipped with its reason, never a crash
+            warnings.warn(f"effect {ep.name!r} from {ep.value} is unavailable: {type(exc).__name__}: {exc}")
+            continue
+        if not (isinstance(cls, type) and issubclass(cls, Effect)):
+            warnings.warn(f"entry point {ep.name!r} in {ENTRY_POINT_GROUP} is not an Effect subclass; skipped")
+            continue
+        register_effect(cls, ("plugin",))
+
+
+# --------------------------------------------------------------- specs in a configuration
+
+_Pairs = tuple[tuple[str, float], ...]
+
+
+def _pairs(d: Mapping[str, Any]) -> _Pairs:
+    return tuple(sorted((str(k), float(v)) for k, v in d.items()))
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """An effect as a model configuration holds it (hashable, serializable).
+
+    Attributes
+    ----------
+    name : str
+    params : tuple of (name, value)
+        Global parameter values (missing ones: the parameter's null value).
+    local : tuple of (id, tuple of (name, value))
+        Values that hold for one cane (cane id) or one trial (trial id) only.
+    scope : str
+        ``global``, ``per_cane`` or ``per_trial`` (what was fitted).
+    """
+
+    name: str
+    params: _Pairs = ()
+    local: tuple[tuple[str, _Pairs], ...] = ()
+    scope: str = "global"
+
+    @classmethod
+    def parse(cls, obj: Any, source: str = "effects") -> "EffectSpec":
+        """From an EffectSpec, a dict (model file) or text ``name`` / ``name(k=v, k2=v2)``."""
+        if isinstance(obj, EffectSpec):
+            return obj
+        if isinstance(obj, Mapping):
+            name = obj.get("effect", obj.get("name"))
+            if not isinstance(name, str):
+                raise InputError(source, "effect", f"an effect entry needs a name, got {dict(obj)!r}")
+            try:
+                local = tuple(sorted((str(k), _pairs(v)) for k, v in (obj.get("local") or {}).items()))
+                return cls(name, _pairs(obj.get("params") or {}), local, str(obj.get("scope", "global")))
+            except (TypeError, ValueError, AttributeError) as exc:
+                raise InputError(source, name, f"parameter values must be numbers: {exc}") from None
+        text = str(obj).strip()
+        m = re.fullmatch(r"([A-Za-z_][\w.-]*)\s*(?:\((.*)\))?", text)
+        if not m:
+            raise InputError(source, text, "expected NAME or NAME(key=value, ...)")
+        params = {}
+        for item in filter(None, (p.strip() for p in (m.group(2) or "").split(","))):
+            k, eq, v = item.partition("=")
+            try:
+                params[k.strip()] = float(v)
+            except ValueError:
+                raise InputError(source, f"{m.group(1)}.{k.strip()}", f"cannot read {v!r} as a number") from None
+            if not eq:
+                raise InputError(source, m.group(1), f"expected key=value, got {item!r}")
+        return cls(m.group(1), _pairs(params))
+
+    def values_for(self, cane_id: str | None = None, trial_id: str | None = None) -> dict[str, float]:
+        """Parameter values that hold for one trial (global, then the cane's, then the trial's)."""
+        out = dict(self.params)
+        loc = dict(self.local)
+        for key in (cane_id, trial_id):
+            if key is not None and key in loc:
+                out.update(dict(loc[key]))
+        return out
+
+    def localized(self, cane_id: str, trial_id: str) -> "EffectSpec":
+        """The same effect with only the values for this trial (for job keys: other canes' values are irrelevant)."""
+        return EffectSpec(self.name, _pairs(self.values_for(cane_id, trial_id)), (), self.scope)
+
+    def instance(self, cane_id: str | None = None, trial_id: str | None = None) -> Effect:
+        return EFFECTS[self.name](**self.values_for(cane_id, trial_id))
+
+    def validate(self, source: str) -> None:
+        load_entry_points()
+        if self.name not in EFFECTS:
+            import difflib
+
+            close = difflib.get_close_matches(self.name, list(EFFECTS), n=1)
+            raise InputError(source, "effects", f"unknown physical effect {self.name!r}"
+                             + (f"; did you mean {close[0]!r}?" if close else f"; registered: {', '.join(EFFECTS)}"))
+        cls = EFFECTS[self.name]
+        if self.scope not in ("global", "per_cane", "per_trial"):
+            raise InputError(source, f"{self.name}.scope", f"must be global, per_cane or per_trial, got {self.scope!r}")
+        for where, pairs in (("", self.params), *((f"[{k}]", v) for k, v in self.local)):
+            for k, v in pairs:
+                if k not in cls.parameters:
+                    raise InputError(source, f"{self.name}{where}.{k}",
+                                     f"unknown parameter; {self.name} has {', '.join(cls.parameters)}")
+                par = cls.parameters[k]
+                ok = math.isfinite(v) or v == par.null
+                if not ok or (par.log and v <= 0) or (k in ("excess_mm",) and v < 0):
+                    raise InputError(source, f"{self.name}{where}.{k}", f"invalid value {v!r} ({par.unit})")
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"effect": self.name, "scope": self.scope, "params": dict(self.params)}
+        if self.local:
+            d["local"] = {k: dict(v) for k, v in self.local}
+        return d
+
+    def __str__(self) -> str:
+        inner = ", ".join(f"{k}={v:.6g}" for k, v in self.params)
+        extra = f" +{len(self.local)} local" if self.local else ""
+        return f"{self.name}({inner}){extra}"
+
+
+def split_effects_text(text: str) -> list[str]:
+    """Split ``a(x=1, y=2), b`` at top-level commas."""
+    out, depth, cur = [], 0, []
+    for ch in text:
+        if ch == "(":
+            depth += 1
+        elif ch == ")":
+            depth -= 1
+        if ch == "," and depth == 0:
+            out.append("".join(cur).strip())
+            cur = []
+        else:
+            cur.append(ch)
+    if "".join(cur).strip():
+        out.append("".join(cur).strip())
+    return [s for s in out if s]
+
+
+@dataclass
+class AppliedEffects:
+    """The effect instances acting on one trial, and their combined hooks."""
+
+    effects: list[Effect] = field(default_factory=list)
+
+    @classmethod
+    def for_trial(cls, specs: tuple[EffectSpec, ...], cane_id: str | None, trial_id: str | None) -> "AppliedEffects":
+        return cls([s.instance(cane_id, trial_id) for s in specs])
+
+    def modulus(self, E: float) -> float:
+        for e in self.effects:
+            E = e.modulus(E)
+        return E
+
+    def diameter(self, s: np.ndarray, d: np.ndarray) -> np.ndarray:
+        for e in self.effects:
+            d = e.diameter(s, d)
+        return d
+
+    def root_compliance(self) -> float:
+        return float(sum(e.root_compliance() for e in self.effects))
+
+    def probe_pitch_deg(self) -> float:
+        return float(sum(e.probe_pitch_deg() for e in self.effects))
+
+    def measured(self, x_m: np.ndarray, f_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        for e in self.effects:
+            x_m, f_n = e.measured(x_m, f_n)
+        return x_m, f_n
+
+    def fit_window_mm(self) -> float | None:
+        w = [v for v in (e.fit_window_mm() for e in self.effects) if v is not None]
+        return min(w) if w else None
+
+    @property
+    def changes_diameter(self) -> bool:
+        return any(type(e).diameter is not Effect.diameter for e in self.effects)

@@ -196,3 +196,43 @@ def bench_memory(links: tuple[int, ...] = (20, 160, 320)) -> pd.DataFrame:
     print("Pinocchio linear stiffness: peak resident memory (MB), fresh process per size")
     print(df.to_string(float_format=lambda v: f"{v:.4g}"))
     return df
+
+
+def bench_export(population: int = 100, seed: int = 0, formats: str = "mjcf,sdf,urdf",
+                 config: ModelConfig | None = None) -> pd.DataFrame:
+    """Time ``canebench export --population N`` against one single export, in this process.
+
+    A warm-up export (imports, first MuJoCo compile) is not timed; then one
+    cane is exported once (the baseline), then a population of ``population``
+    drawn canes over the bundled set, all formats, to temporary folders.
+    Prints both wall times, the population's time per cane and the ratios
+    population/single and per-cane/single.
+    """
+    import tempfile
+    import time
+    from pathlib import Path
+
+    from ..export.bundle import export_canes, export_population, parse_formats, select
+
+    config = config or ModelConfig()
+    fmts = parse_formats(formats)
+    selection = select(load_dataset(bundled_dataset()), by_trial=False)
+    with tempfile.TemporaryDirectory() as d:
+        export_canes(selection[:1], config, Path(d) / "warmup", fmts)
+        t0 = time.perf_counter()
+        export_canes(selection[:1], config, Path(d) / "single", fmts)
+        single = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        res = export_population(selection, config, Path(d) / "population", population, seed, formats=fmts)
+        pop = time.perf_counter() - t0
+        n_files = sum(1 for _ in (Path(d) / "population").rglob("*") if _.is_file())
+    df = pd.DataFrame([{"what": "single", "canes": 1, "wall_s": single},
+                       {"what": "population", "canes": len(res.manifest), "wall_s": pop}]).set_index("what")
+    df["per_cane_s"] = df.wall_s / df.canes
+    df["vs_single"] = df.wall_s / single
+    print(f"export ({','.join(fmts)}), one process: one cane vs a population of {population} drawn canes "
+          f"(seed {seed}, {n_files} files incl. manifest)")
+    print(df.to_string(float_format=lambda v: f"{v:.4g}"))
+    print(f"population of {population}: {pop:.2f} s ({pop / population * 1e3:.1f} ms per cane, "
+          f"{df.per_cane_s['population'] / single:.2f}x one single export per cane)")
+    return df

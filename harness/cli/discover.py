@@ -1,0 +1,77 @@
+"""``canebench discover``: find, name and fit the missing physical effect (or run the self-test)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from . import common
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("discover", help="find where simulation and measurement disagree and name the missing effect")
+    common.add_data_options(p)
+    p.add_argument("--out", default="canebench-runs/discover", help="output folder (discovery.json, model.yaml...)")
+    p.add_argument("--baseline", default="beam", help="beam (default), chain or paper")
+    p.add_argument("--backends", help="engines re-run before/after with the fitted model (default: the baseline's)")
+    p.add_argument("--candidates", help="comma-separated effects to screen (default: the library's global effects)")
+    p.add_argument("--alpha", type=float, default=0.05, help="family-wise significance per selection step")
+    p.add_argument("--bootstrap", type=int, default=100, help="cane-bootstrap replicates of the intervals")
+    p.add_argument("--no-confirm", action="store_true", help="skip re-running the engines with the fitted model")
+    p.add_argument("--selftest", action="store_true", help="run the seeded hidden-effect suite instead")
+    p.add_argument("--seed", type=int, default=7, help="self-test seed")
+    p.add_argument("--workers", type=int, default=2, help="self-test processes")
+    g = p.add_argument_group("execution")
+    g.add_argument("--executor", default="local", help="local (default), serial or dask")
+    g.add_argument("--jobs", type=int, default=__import__("os").cpu_count() or 1)
+    g.add_argument("--scheduler")
+    p.set_defaults(fn=main)
+
+
+def main(a: argparse.Namespace) -> int:
+    if a.selftest:
+        from ..discovery.selftest import run_selftest, summarize
+
+        out = Path(a.out if a.out != "canebench-runs/discover" else "canebench-runs/discover-selftest")
+        df = run_selftest(out, a.seed, a.workers)
+        cols = ["id", "named", "unexplained", "size", "gap_before", "gap_after_cv"] + \
+               [c for c in df.columns if c.startswith("err_")]
+        print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+        print(json.dumps(summarize(df), indent=2, default=float))
+        print(f"written: {out / 'selftest.csv'}, {out / 'selftest.json'}")
+        return 0
+    from ..discovery.workflow import discover
+    from ..execute.progress import Progress
+
+    _, trials = common.trials(a)
+    ex = common.executor(argparse.Namespace(executor=a.executor, jobs=a.jobs, scheduler=a.scheduler))
+    backends = [b.strip() for b in a.backends.split(",")] if a.backends else None
+    cands = tuple(c.strip() for c in a.candidates.split(",")) if a.candidates else None
+    res = discover(trials, a.baseline, backends, a.out, ex, cands, a.alpha, a.bootstrap, confirm=not a.no_confirm,
+                   progress=Progress())
+    doc = res.to_json()
+    g = doc["gap"]
+    print(f"canebench discover: {len(trials)} trials, baseline {res.baseline}")
+    for n in doc["notes"]:
+        print(f"  {n}")
+    for n in doc["named"]:
+        if n["effect"] == "obstruction":
+            print(f"  named: obstruction in {n['n_trials']} trial(s): "
+                  + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" for t, v in n["local"].items()))
+        else:
+            print(f"  named: {n['effect']} " + ", ".join(
+                f"{k} = {v:.4g} {n['units'].get(k, '')} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}]"
+                for k, v in n["params"].items()))
+    if not doc["named"]:
+        print("  named: nothing in the library explains the residual significantly")
+    print(f"  stopped: {doc['stop_reason']}")
+    print(f"  median |ln k_model/k_field|: {g['before']['median_abs_log_ratio']:.3f} before, "
+          f"{g['after_cv']['median_abs_log_ratio']:.3f} after (out of sample); worst "
+          f"{g['before']['worst_abs_log_ratio']:.3f} -> {g['after_cv']['worst_abs_log_ratio']:.3f}")
+    for b, v in g.get("per_backend", {}).items():
+        print(f"  {b:10s} before {v['before_median']:.3f}  after {v['after_median']:.3f} (in sample)  "
+              f"{v['after_cv_median']:.3f} (out of sample)  screen vs engine {v['screen_vs_engine_max']:.2g}")
+    print(f"  unexplained structure left: {doc['unexplained']}")
+    print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")
+    return 0

@@ -1,0 +1,101 @@
+"""Discovery figures and report section, rebuilt from the files ``canebench discover`` wrote."""
+
+from __future__ import annotations
+
+import html
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+
+def figures(out: str | Path) -> list[Path]:
+    """``discovery_gap.png`` (per trial, before vs out-of-sample after) and ``discovery_residuals.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    df = pd.read_csv(out / "discovery.csv")
+    doc = json.loads((out / "discovery.json").read_text())
+    d = df[np.isfinite(df.r_before)].sort_values("r_before")
+    paths = []
+    fig, ax = plt.subplots(figsize=(9, 4))
+    x = np.arange(len(d))
+    ax.axhline(0, color="k", lw=0.8)
+    ax.plot(x, d.r_before, "o", ms=4, label=f"before ({doc['baseline']} baseline)")
+    ax.plot(x, d.r_after_cv, "s", ms=4, mfc="none", label="after, out of sample (leave one cane out)")
+    for xi, a, b in zip(x, d.r_before, d.r_after_cv):
+        ax.plot([xi, xi], [a, b], color="0.7", lw=0.6)
+    ax.set_xticks(x)
+    ax.set_xticklabels(d.trial, rotation=90, fontsize=6)
+    ax.set_ylabel("ln(k_field / k_model)")
+    named = ", ".join(n["effect"] for n in doc["named"]) or "nothing named"
+    g = doc["gap"]
+    ax.set_title(f"{named}: median |ln| {g['before']['median_abs_log_ratio']:.3f} -> "
+                 f"{g['after_cv']['median_abs_log_ratio']:.3f} out of sample", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    p = out / "discovery_gap.png"
+    fig.savefig(p, dpi=120)
+    plt.close(fig)
+    paths.append(p)
+    feats = ["height_m", "diameter_mm", "above_lowest_caliper_m", "log_k_field"]
+    fig, axes = plt.subplots(1, len(feats), figsize=(12, 3), sharey=True)
+    for ax, f in zip(axes, feats):
+        if f in d:
+            ax.plot(d[f], d.r_before, "o", ms=3, label="before")
+            ax.plot(d[f], d.r_after_cv, "s", ms=3, mfc="none", label="after (CV)")
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xlabel(f)
+    axes[0].set_ylabel("ln(k_field / k_model)")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    p = out / "discovery_residuals.png"
+    fig.savefig(p, dpi=120)
+    plt.close(fig)
+    paths.append(p)
+    return paths
+
+
+def section(folder: str | Path) -> str:
+    """HTML section for a folder holding ``discovery.json`` (empty string if none)."""
+    folder = Path(folder)
+    f = folder / "discovery.json"
+    if not f.exists():
+        return ""
+    doc = json.loads(f.read_text())
+    g = doc["gap"]
+    rows = []
+    for n in doc["named"]:
+        ps = "; ".join(f"{k} = {v:.4g} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}] {n.get('units', {}).get(k, '')}"
+                       if k in n.get("ci95", {}) else f"{k} = {v:.4g}" for k, v in n["params"].items())
+        if n["effect"] == "obstruction":
+            ps = f"{n.get('n_trials', len(n.get('local', {})))} trial(s): " + ", ".join(
+                f"{t} at {v['onset_mm']:.1f} mm" for t, v in n.get("local", {}).items())
+        rows.append(f"<tr><td>{html.escape(n['effect'])}</td><td>{n['scope']}</td><td>{html.escape(ps)}</td></tr>")
+    eng = ""
+    if "per_backend" in g:
+        eng = "<table><tr><th>backend</th><th>before median / worst</th><th>after (in sample)</th>" \
+              "<th>after, out of sample</th><th>screen vs engine (max |d ln k|)</th></tr>" + "".join(
+            f"<tr><td>{b}</td><td>{v['before_median']:.3f} / {v['before_worst']:.3f}</td>"
+            f"<td>{v['after_median']:.3f} / {v['after_worst']:.3f}</td>"
+            f"<td>{v['after_cv_median']:.3f} / {v['after_cv_worst']:.3f}</td><td>{v['screen_vs_engine_max']:.2g}</td></tr>"
+            for b, v in g["per_backend"].items()) + "</table>"
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in doc.get("notes", []))
+    bs = doc.get("between_cane_share", {})
+    return f"""
+<h2>Discovery: what the model misses</h2>
+<p>Baseline <b>{html.escape(doc['baseline'])}</b>. Median |ln(k_model/k_field)|
+{g['before']['median_abs_log_ratio']:.3f} (worst {g['before']['worst_abs_log_ratio']:.3f}) before;
+{g['after_cv']['median_abs_log_ratio']:.3f} (worst {g['after_cv']['worst_abs_log_ratio']:.3f}) after, out of sample
+(leave one cane out). Share of the residual variance between canes: {bs.get('before', float('nan')):.2f} before,
+{bs.get('after_cv', float('nan')):.2f} after. Unexplained structure left: <b>{doc['unexplained']}</b>.
+Selection stopped: {html.escape(doc.get('stop_reason', ''))}.</p>
+<table><tr><th>named effect</th><th>scope</th><th>parameters (95 % cane-bootstrap interval)</th></tr>{''.join(rows) or '<tr><td colspan=3>nothing named</td></tr>'}</table>
+{eng}
+<ul>{notes}</ul>
+<img src="discovery_gap.png" width="800"><br><img src="discovery_residuals.png" width="800">
+"""

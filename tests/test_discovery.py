@@ -1,0 +1,225 @@
+"""The discovery workflow: effects on every engine, the screen, model files, onsets, naming on hidden data."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from canebench.errors import InputError
+from canebench.model.chain import build_chain
+from canebench.model.config import ModelConfig
+from canebench.studies.convergence import straight_cantilever
+
+E, L, D = 4.57e9, 1.2, 0.012
+I_AREA = math.pi * D**4 / 64
+
+
+def _cantilever_k(extra_compliance: float = 0.0) -> float:
+    return 1.0 / (L**3 / (3 * E * I_AREA) + extra_compliance)
+
+
+@pytest.fixture(scope="module")
+def cantilever():
+    return straight_cantilever(False)
+
+
+def _cfg(*effects: str) -> ModelConfig:
+    return ModelConfig(effects=effects, gravity=0.0, stiffness_formula="dual_length", discretization="uniform",
+                       segments=40)
+
+
+def test_root_compliance_reaches_beam_and_chain_as_the_closed_form(cantilever):
+    """Tip of a uniform cantilever on a root spring: C = L^3/3EI + L^2/k_root (Euler-Bernoulli, exact)."""
+    from canebench.backends.beam_backend import BeamStatic
+    from canebench.backends.pinocchio_backend import rest_linear_stiffness
+
+    k_root = 50.0
+    chain = build_chain(cantilever, cantilever.push_points[0].id, _cfg(f"root_compliance(k_root={k_root})"))
+    exact = _cantilever_k(L**2 / k_root)
+    # the beam is converged to 1e-4 by construction; the 40-link chain's own error is 3e-4 at the tip
+    assert BeamStatic(chain).linear_stiffness() == pytest.approx(exact, rel=2e-4)
+    assert rest_linear_stiffness(chain) == pytest.approx(exact, rel=1e-3)
+    plain = build_chain(cantilever, cantilever.push_points[0].id, _cfg())
+    assert 1 / chain.stiffness[0] == pytest.approx(1 / plain.stiffness[0] + 1 / k_root, rel=1e-12)
+
+
+def test_modulus_misalignment_and_flare_change_every_model_alike(cantilever):
+    from canebench.backends.beam_backend import BeamStatic
+    from canebench.backends.pinocchio_backend import rest_linear_stiffness
+
+    pid = cantilever.push_points[0].id
+    k0 = BeamStatic(build_chain(cantilever, pid, _cfg())).linear_stiffness()
+    assert k0 == pytest.approx(_cantilever_k(), rel=2e-4)
+    ks = BeamStatic(build_chain(cantilever, pid, _cfg("modulus_scale(scale=1.7)"))).linear_stiffness()
+    assert ks / k0 == pytest.approx(1.7, rel=1e-6)
+    # a straight cantilever pushed at pitch a: axially rigid, so F = k d / cos^2 a
+    for a in (10.0, 25.0):
+        c = build_chain(cantilever, pid, _cfg(f"probe_misalignment(angle_deg={a})"))
+        assert BeamStatic(c).linear_stiffness() / k0 == pytest.approx(1 / math.cos(math.radians(a)) ** 2, rel=1e-3)
+    c = build_chain(cantilever, pid, _cfg("base_flare(excess_mm=6, length_mm=100)"))
+    kb, kc = BeamStatic(c).linear_stiffness(), rest_linear_stiffness(c)
+    assert kb > 1.3 * k0  # a thicker base stiffens the cantilever...
+    assert kc == pytest.approx(kb, rel=2e-3)  # ...in the chain as in the beam
+
+
+def test_screen_is_the_beams_linear_stiffness_with_every_effect():
+    from canebench.backends.beam_backend import BeamStatic
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.discovery.screen import trial_geometry
+    from canebench.model.presets import PRESETS
+
+    cfg = PRESETS["beam-consistent"].replace(gravity=0.0)
+    eff = ("root_compliance(k_root=20)", "base_flare(excess_mm=4, length_mm=80)",
+           "probe_misalignment(angle_deg=15)", "modulus_scale(scale=1.3)")
+    for t in load_dataset(bundled_dataset(), "b2c1t1,b5c3t3"):
+        g = trial_geometry(t, cfg)
+        for e in ((), eff):
+            c = cfg.replace(effects=e)
+            cc, _ = g.compliance(c.applied_effects(t.cane.id, t.id) if e else None)
+            kb = BeamStatic(build_chain(t.cane, t.push_id, c)).linear_stiffness()
+            # two independent small-deflection solutions of one rod: quadrature vs RK4 shooting (1e-4 mesh)
+            assert 1 / cc == pytest.approx(kb, rel=2e-4)
+
+
+def test_rig_compliance_is_a_spring_in_series_with_the_measured_trace():
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.execute.runner import run_trials
+    from canebench.execute.executors import make_executor
+    from canebench.probe.protocol import PROTOCOLS
+
+    trials = load_dataset(bundled_dataset(), "b3c2t1")
+    ex = make_executor("serial", 1, None)
+    k0 = run_trials(trials, ["pinocchio"], PROTOCOLS["fast"], ModelConfig(), executor=ex).to_df().k_sim.iloc[0]
+    k_rig = 200.0
+    k1 = run_trials(trials, ["pinocchio"], PROTOCOLS["fast"], ModelConfig(effects=(f"rig_compliance(k_rig={k_rig})",)),
+                    executor=ex).to_df().k_sim.iloc[0]
+    # N/mm; the series rule is exact for a linear cane, the probe's trace bends by a few per cent
+    assert 1 / k1 == pytest.approx(1 / k0 + 1 / (k_rig * 1e-3), rel=0.02)
+
+
+def test_model_file_round_trip_and_bad_files(tmp_path):
+    from canebench.model.modelfile import load_model_file, write_model_file
+    from canebench.model.presets import PRESETS
+
+    cfg = PRESETS["beam-consistent"].replace(effects=(
+        "root_compliance(k_root=42)",
+        {"effect": "obstruction", "scope": "per_trial", "local": {"b1c1t2": {"onset_mm": 12.5}}}))
+    p = write_model_file(tmp_path / "m.yaml", cfg, "beam-consistent", {"root_compliance": {"k_root": [30, 60]}})
+    back = load_model_file(p)
+    assert back == cfg
+    assert back.fit_window_mm("b1c1", "b1c1t2") == 12.5 and back.fit_window_mm("b1c1", "b1c1t1") is None
+    bad = {"effects: [{effect: wind}]": "wind", "effects: [{effect: root_compliance, params: {k_root: -1}}]": "k_root",
+           "preset: nope": "preset", "colour: red": "colour", "effects: {a: 1}": "effects", "[1, 2": "<file>"}
+    for text, field in bad.items():
+        (tmp_path / "bad.yaml").write_text(text)
+        with pytest.raises(InputError, match=field) as ei:
+            load_model_file(tmp_path / "bad.yaml")
+        assert "bad.yaml" in str(ei.value)
+
+
+def test_onset_finds_kinks_not_curvature():
+    from canebench.discovery.onsets import detect_onset
+
+    rng = np.random.default_rng(3)
+    x = np.arange(0, 40, 0.5)
+    noise = rng.normal(0, 0.02, len(x))  # 2 gf
+    kink = 0.05 * x + 0.3 * np.maximum(x - 22.0, 0) + noise
+    o = detect_onset(x, kink)
+    assert o is not None and abs(o.onset_mm - 22.0) <= 1.0
+    smooth_up = 0.05 * x + 0.002 * x**2 + noise  # large-deflection stiffening: no second body
+    assert detect_onset(x, smooth_up) is None
+    assert detect_onset(x, 0.05 * x + noise) is None
+
+
+@pytest.mark.field
+def test_onset_on_the_real_elbow(field_dir):
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.onsets import detect_onset
+    from canebench.execute.pipeline import field_stage
+
+    t = load_dataset(field_dir, "b5c2t3")
+    ff = field_stage(t)["b5c2t3"].fit
+    o = detect_onset(ff.displacement_mm, ff.force_n)
+    # the README's elbow: 0.07 -> 1.9 N/mm near 37-40 mm
+    assert o is not None and 30 <= o.onset_mm <= 42 and o.slope_after > 10 * o.slope_before
+
+
+def test_third_party_effect_plugs_in(cantilever, monkeypatch):
+    from canebench.model import effects as fxmod
+    from canebench.model.effects import EFFECTS, Effect, Parameter
+
+    class Stiffer(Effect):
+        name = "test_stiffer_root"
+        where = "base"
+        parameters = {"factor": Parameter("1", 1.0, 10.0, 1.0)}
+
+        def modulus(self, E):
+            return E * self.p["factor"]
+
+    class FakeEP:
+        name, value = "test_stiffer_root", "pkg:Stiffer"
+
+        def load(self):
+            return Stiffer
+
+    monkeypatch.setattr(fxmod, "_loaded", False)
+    monkeypatch.setattr(fxmod.metadata, "entry_points", lambda group: [FakeEP()] if group == fxmod.ENTRY_POINT_GROUP else [])
+    try:
+        c = build_chain(cantilever, cantilever.push_points[0].id, _cfg("test_stiffer_root(factor=2)"))
+        assert c.modulus == pytest.approx(2 * E)
+    finally:
+        if "test_stiffer_root" in EFFECTS:
+            EFFECTS.remove("test_stiffer_root")
+
+
+@pytest.fixture(scope="module")
+def hidden_root(tmp_path_factory):
+    from canebench.canes.generate_hidden import generate_hidden
+
+    d = tmp_path_factory.mktemp("hidden") / "root"
+    return generate_hidden(d, 11, {"root_compliance": {"k_root": 15.0}}, n_bushes=6)
+
+
+def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root, tmp_path):
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.execute.executors import make_executor
+    from canebench.model.modelfile import load_model_file
+
+    out = tmp_path / "d"
+    res = discover(load_dataset(hidden_root), out=out, executor=make_executor("serial", 1, None), n_boot=20,
+                   backends=["beam", "pinocchio"])
+    doc = json.loads((out / "discovery.json").read_text())
+    assert set(doc) >= {"baseline", "named", "unexplained", "gap", "trials"}
+    named = {n["effect"]: n for n in doc["named"]}
+    assert set(named) == {"root_compliance"}, doc["named"]
+    # the truth is 15 N m/rad; the issue asks for 20 %
+    assert named["root_compliance"]["params"]["k_root"] == pytest.approx(15.0, rel=0.2)
+    lo, hi = named["root_compliance"]["ci95"]["k_root"]
+    assert lo < named["root_compliance"]["params"]["k_root"] < hi
+    g = doc["gap"]
+    assert g["after_cv"]["median_abs_log_ratio"] < 0.5 * g["before"]["median_abs_log_ratio"]
+    # every engine re-run with the fitted model agrees with the screen's prediction
+    for b, v in g["per_backend"].items():
+        assert v["after_median"] < 0.5 * v["before_median"], b
+        assert v["screen_vs_engine_max"] < 0.05, b
+    cfg = load_model_file(out / "model.yaml")
+    assert [e.name for e in cfg.effects] == ["root_compliance"]
+    assert (out / "report.html").read_text().count("Discovery") >= 1
+    assert len(res.to_df()) == 54
+
+
+def test_discover_names_nothing_on_a_null_dataset(tmp_path):
+    from canebench.canes.generate_hidden import generate_hidden
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.execute.executors import make_executor
+
+    d = generate_hidden(tmp_path / "null", 12, {}, n_bushes=6)
+    res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10)
+    assert res.named == [], res.named
+    assert res.gap["after_cv"] == res.gap["before"]

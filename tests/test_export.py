@@ -1,0 +1,426 @@
+"""``canebench export``: every exported file, loaded by its own consumer, gives the chain's stiffness.
+
+References are computed from the chain the harness builds (Pinocchio's frame
+Jacobian of ``chain_to_pinocchio`` at rest), never from the exported files;
+the exported files are read by MuJoCo (MJCF), PyBullet (URDF + sidecar) and a
+plain XML parser doing its own kinematics (SDF).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import filecmp
+import json
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.spatial.transform import Rotation
+
+from canebench import __version__
+from canebench.cli import main
+from canebench.data.cane import Caliper
+from canebench.data.dataset import bundled_dataset, load_dataset
+from canebench.model.chain import Chain, build_chain
+from canebench.model.config import ModelConfig
+from canebench.model.distributions import MODULUS_DISTRIBUTIONS
+from canebench.model.presets import PRESETS
+
+RTOL = 1e-3
+
+MODEL_FILE = """\
+canebench_model: 1
+preset: beam-consistent
+config: {segments: 8}
+effects:
+  - {effect: root_compliance, params: {k_root: 40.0}}
+  - {effect: base_flare, params: {excess_mm: 3.0, length_mm: 120.0}}
+  - {effect: probe_misalignment, params: {angle_deg: 10.0}}
+"""
+
+
+# ------------------------------------------------------------------ references and readers
+
+
+def pinocchio_k(chain: Chain) -> float:
+    """Small-deflection probe stiffness (N/m) from Pinocchio's own frame Jacobian at rest."""
+    pin = pytest.importorskip("pinocchio")
+    from canebench.backends.pinocchio_backend import chain_to_pinocchio
+
+    model, fid = chain_to_pinocchio(chain)
+    data = model.createData()
+    q0 = pin.neutral(model)
+    J = pin.computeFrameJacobian(model, data, q0, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
+    g = np.asarray(chain.direction) @ J
+    return float(1.0 / np.sum(g**2 / chain.joint_stiffness_vector()))
+
+
+def mujoco_k(path: Path, force: float = 1e-3) -> float:
+    """Probe stiffness of an MJCF file by MuJoCo statics: push +-force with the file's
+    ``probe`` actuator, gravity off, and find the equilibrium from MuJoCo's own spring
+    and actuator forces (q <- q + K^-1 (qfrc_passive + qfrc_actuator))."""
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(str(path))
+    m.opt.gravity[:] = 0.0
+    d = mujoco.MjData(m)
+    act = m.actuator("probe").id
+    K = m.jnt_stiffness[m.dof_jntid]
+    assert np.all(K > 0) and np.all(m.qpos_spring == 0)
+
+    def displacement(F: float) -> float:
+        d.qpos[:] = m.qpos0
+        d.qvel[:] = 0.0
+        d.ctrl[act] = F
+        for _ in range(100):
+            mujoco.mj_forward(m, d)
+            r = d.qfrc_passive + d.qfrc_actuator
+            if np.max(np.abs(r)) < 1e-14 * max(1.0, np.max(np.abs(d.qfrc_actuator))):
+                break
+            d.qpos[:] += r / K
+        else:
+            raise AssertionError("MuJoCo statics did not converge")
+        return float(d.actuator_length[act])
+
+    return 2.0 * force / (displacement(force) - displacement(-force))
+
+
+def pybullet_k(urdf: Path, sidecar: dict) -> tuple[float, np.ndarray, dict]:
+    """Probe stiffness of a URDF + sidecar in PyBullet: 1 / sum((u . J_i)^2 / K_i) with J from
+    calculateJacobian at the 'probe' link and K from the sidecar; also the probe's world position
+    and the PyBullet masses of the cane links."""
+    p = pytest.importorskip("pybullet")
+    from pybullet_utils import bullet_client
+
+    c = bullet_client.BulletClient(connection_mode=p.DIRECT)
+    try:
+        body = c.loadURDF(str(urdf), useFixedBase=True, flags=p.URDF_USE_INERTIA_FROM_FILE)
+        info = [c.getJointInfo(body, i) for i in range(c.getNumJoints(body))]
+        movable = [i for i, ji in enumerate(info) if ji[2] != p.JOINT_FIXED]
+        names = [info[i][1].decode() for i in movable]
+        assert set(names) == set(sidecar["joints"])
+        K = np.array([sidecar["joints"][n]["stiffness"] for n in names])
+        assert all(sidecar["joints"][n]["rest_angle"] == 0.0 for n in names)
+        probe = next(i for i, ji in enumerate(info) if ji[12].decode() == "probe")
+        zeros = [0.0] * len(movable)
+        lin, _ = c.calculateJacobian(body, probe, [0.0, 0.0, 0.0], zeros, zeros, zeros)
+        st = c.getLinkState(body, probe, computeForwardKinematics=1)
+        u = np.array(c.getMatrixFromQuaternion(st[5])).reshape(3, 3)[:, 0]
+        g = u @ np.array(lin)
+        masses = {ji[12].decode(): c.getDynamicsInfo(body, i)[0] for i, ji in enumerate(info)}
+        return float(1.0 / np.sum(g**2 / K)), np.array(st[4]), masses
+    finally:
+        c.disconnect()
+
+
+def sdf_k(path: Path) -> tuple[float, ET.Element]:
+    """Probe stiffness from an SDF file's own poses, axes and springs (world-posed links,
+    joints at their child's origin, axes in the child frame, frame 'probe' on its link)."""
+    root = ET.parse(path).getroot()
+    assert root.tag == "sdf" and root.get("version") == "1.7"
+    model = root.find("model")
+
+    def pose(e: ET.Element) -> tuple[np.ndarray, np.ndarray]:
+        v = np.array(e.find("pose").text.split(), float)
+        return v[:3], Rotation.from_euler("xyz", v[3:]).as_matrix()
+
+    links = {ln.get("name"): pose(ln) for ln in model.findall("link")}
+    joints = {}
+    for jt in model.findall("joint"):
+        assert jt.get("type") == "revolute"
+        assert np.allclose(np.array(jt.find("pose").text.split(), float), 0.0)
+        child, parent = jt.find("child").text, jt.find("parent").text
+        assert child in links and (parent in links or parent == "world")
+        dyn = jt.find("axis/dynamics")
+        assert float(dyn.find("spring_reference").text) == 0.0
+        joints[child] = (parent, np.array(jt.find("axis/xyz").text.split(), float),
+                         float(dyn.find("spring_stiffness").text))
+    fr = model.find("frame[@name='probe']")
+    host = fr.get("attached_to")
+    assert fr.find("pose").get("relative_to") == host
+    pl, Rl = pose(fr)
+    p0, R0 = links[host]
+    point, u = p0 + R0 @ pl, R0 @ Rl[:, 0]
+    comp, at = 0.0, host
+    while at != "world":  # joints from the probe's link down to the clamp move the probe
+        parent, axis, k = joints[at]
+        o, R = links[at]
+        comp += ((np.cross(R @ axis, point - o)) @ u) ** 2 / k
+        at = parent
+    return 1.0 / comp, model
+
+
+# ------------------------------------------------------------------ fixtures
+
+
+@pytest.fixture(scope="module")
+def data():
+    return load_dataset(bundled_dataset())
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory, data):
+    """Exports through the CLI under several model configurations; (folder, config, argv) each."""
+    root = tmp_path_factory.mktemp("export")
+    mf = root / "model.yaml"
+    mf.write_text(MODEL_FILE)
+    from canebench.model.modelfile import load_model_file
+
+    cases = [
+        (["--canes", "b1c*,b4c2"], PRESETS["default"]),
+        (["--trials", "b2c3t2,b5c1t3", "--preset", "beam-consistent", "--set", "twist_joint=true"],
+         PRESETS["beam-consistent"].replace(twist_joint=True)),
+        (["--canes", "b6c1", "--push", "3", "--segments", "12", "--stiffness-formula", "end_angle",
+          "--modulus", "3.1e9"], ModelConfig(segments=12, stiffness_formula="end_angle", modulus_pa=3.1e9)),
+        (["--canes", "b3c3", "--model", str(mf)], load_model_file(mf)),
+    ]
+    out = []
+    for i, (argv, cfg) in enumerate(cases):
+        d = root / f"case{i}"
+        assert main(["export", *argv, "--out", str(d)]) == 0
+        out.append((d, cfg, argv))
+    return out
+
+
+def _chain_of(row: pd.Series, cfg: ModelConfig, data) -> Chain:
+    cane = next(t.cane for t in data if t.cane.id == row.cane)
+    return build_chain(cane, str(row.push_point), cfg)
+
+
+# ------------------------------------------------------------------ round trips
+
+
+def test_every_exported_model_gives_the_chains_stiffness(exported, data):
+    from canebench.export.urdf import load_sidecar
+
+    n = 0
+    for d, cfg, argv in exported:
+        man = pd.read_csv(d / "manifest.csv", dtype={"push_point": str})
+        assert len(man) > 0
+        for row in man.itertuples():
+            chain = _chain_of(pd.Series(row._asdict()), cfg, data)
+            assert row.chain_fingerprint == chain.fingerprint() and row.n_joints == chain.n_dof
+            k_ref = pinocchio_k(chain)
+            # MJCF in MuJoCo
+            k_mj = mujoco_k(d / row.file_mjcf)
+            assert abs(k_mj / k_ref - 1) < RTOL, (argv, row.name, k_mj, k_ref)
+            # URDF + sidecar in PyBullet
+            side = load_sidecar(d / row.file_springs)
+            k_pb, probe_pos, masses = pybullet_k(d / row.file_urdf, side)
+            assert abs(k_pb / k_ref - 1) < RTOL, (argv, row.name, k_pb, k_ref)
+            assert np.allclose(probe_pos, chain.push_point, atol=1e-6)
+            cane_mass = sum(masses[f"link{j}"] for j in range(chain.n_links))
+            assert cane_mass == pytest.approx(chain.masses.sum(), rel=1e-12)
+            # SDF by its own kinematics
+            k_sdf, _ = sdf_k(d / row.file_sdf)
+            assert abs(k_sdf / k_ref - 1) < RTOL, (argv, row.name, k_sdf, k_ref)
+            assert row.k_linear_N_per_mm == pytest.approx(k_ref * 1e-3, rel=1e-9)
+            n += 1
+    assert n == 4 + 2 + 1 + 1
+
+
+def test_the_model_file_and_options_reach_the_exported_physics(exported, data):
+    """--model's effects and the shorthands change the exported stiffness (not ignored)."""
+    d_opts, (d_model, cfg_model, _) = exported[2][0], exported[3]
+    for d in (d_opts, d_model):
+        row = pd.read_csv(d / "manifest.csv", dtype={"push_point": str}).iloc[0]
+        plain = build_chain(next(t.cane for t in data if t.cane.id == row.cane), str(row.push_point), ModelConfig())
+        assert abs(mujoco_k(d / row.file_mjcf) / pinocchio_k(plain) - 1) > 0.05
+    assert len(cfg_model.effects) == 3
+    side = json.loads((d_model / "manifest.json").read_text())
+    assert [e for e in side["config"]["effects"]], "the model file's effects are recorded"
+
+
+def test_mjcf_file_is_the_backends_model_exactly(exported, data, tmp_path):
+    """The MJCF written at full precision reloads to the model the MuJoCo backend compiles
+    (same builder), apart from the probe actuator and collision bits."""
+    import mujoco
+
+    from canebench.backends.mujoco_backend import MujocoBackend
+    from canebench.probe.protocol import PROTOCOLS
+
+    d, cfg, _ = exported[1]  # twist joints
+    row = pd.read_csv(d / "manifest.csv", dtype={"push_point": str}).iloc[0]
+    chain = _chain_of(row, cfg, data)
+    sim = MujocoBackend().build(chain, PROTOCOLS["fast"])
+    m_file = mujoco.MjModel.from_xml_path(str(d / row.file_mjcf))
+    for f in ("body_pos", "body_quat", "body_mass", "body_inertia", "body_ipos", "jnt_axis", "jnt_stiffness",
+              "dof_damping", "site_pos", "site_quat", "geom_size", "opt.timestep"):
+        a, b = (getattr(m.opt, f[4:]) if f.startswith("opt.") else getattr(m, f) for m in (sim.m, m_file))
+        np.testing.assert_array_equal(a, b, err_msg=f)
+    assert m_file.opt.integrator == mujoco.mjtIntegrator.mjINT_DISCRETE
+    i = mujoco.mj_name2id(m_file, mujoco.mjtObj.mjOBJ_TEXT, "canebench")
+    meta = bytes(m_file.text_data[m_file.text_adr[i]:m_file.text_adr[i] + m_file.text_size[i] - 1]).decode()
+    assert json.loads(meta)["chain_fingerprint"] == chain.fingerprint()
+
+
+def test_sdf_structure_and_values(exported, data):
+    d, cfg, _ = exported[1]  # twist joints: three joints and two intermediate links per cane link
+    row = pd.read_csv(d / "manifest.csv", dtype={"push_point": str}).iloc[0]
+    chain = _chain_of(row, cfg, data)
+    _, model = sdf_k(d / row.file_sdf)
+    assert model.get("name") == row["name"]
+    joints = model.findall("joint")
+    assert [j.get("name") for j in joints] == [f"j{i}{a}" for i in range(chain.n_links) for a in "xyz"]
+    assert joints[0].find("parent").text == "world"
+    K = np.array([float(j.find("axis/dynamics/spring_stiffness").text) for j in joints])
+    np.testing.assert_array_equal(K, chain.joint_stiffness_vector())
+    assert all(float(j.find("axis/dynamics/damping").text) == chain.damping for j in joints)
+    for i in range(chain.n_links):
+        ln = model.find(f"link[@name='link{i}']")
+        assert float(ln.find("inertial/mass").text) == chain.masses[i]
+        assert [float(ln.find(f"inertial/inertia/{t}").text) for t in ("ixx", "iyy", "izz")] == list(chain.inertias[i])
+        for kind in ("visual", "collision"):
+            cyl = ln.find(f"{kind}/geometry/cylinder")
+            assert float(cyl.find("radius").text) == chain.diameters[i] / 2
+            assert float(cyl.find("length").text) == chain.lengths[i]
+        pos = np.array(ln.find("pose").text.split(), float)
+        np.testing.assert_allclose(pos[:3], chain.nodes[i], atol=1e-15)
+        np.testing.assert_allclose(Rotation.from_euler("xyz", pos[3:]).as_matrix(), chain.frames[i], atol=1e-12)
+        dummy = float(model.find(f"link[@name='link{i}_x']/inertial/mass").text)
+        assert 0 < dummy <= 1e-3 * chain.masses[i]
+
+
+def test_urdf_sidecar_content_and_note(exported, data):
+    from canebench.export.urdf import load_sidecar
+
+    d, cfg, _ = exported[0]
+    row = pd.read_csv(d / "manifest.csv", dtype={"push_point": str}).iloc[0]
+    chain = _chain_of(row, cfg, data)
+    text = (d / row.file_springs).read_text()
+    for word in ("PyBullet", "TORQUE_CONTROL", "Isaac Lab", "ImplicitActuatorCfg", "Gazebo"):
+        assert word in text.split("\nformat:")[0], word  # in the header comment
+    side = load_sidecar(d / row.file_springs)
+    assert side["urdf"] == Path(row.file_urdf).name
+    assert [side["joints"][f"j{i}{a}"]["stiffness"] for i in range(chain.n_links) for a in "xy"] == \
+        list(chain.joint_stiffness_vector())
+    assert side["canebench"]["chain_fingerprint"] == chain.fingerprint()
+    urdf = ET.parse(d / row.file_urdf).getroot()
+    springs = {g.get("reference"): float(g.find("springStiffness").text) for g in urdf.findall("gazebo")
+               if g.find("springStiffness") is not None}
+    assert springs == {n: v["stiffness"] for n, v in side["joints"].items()}
+    damp = {j.get("name"): float(j.find("dynamics").get("damping")) for j in urdf.findall("joint[@type='continuous']")}
+    assert damp == {n: v["damping"] for n, v in side["joints"].items()}
+    with pytest.raises(ValueError, match="not a canebench-joint-springs"):
+        load_sidecar(d / row.file_urdf)
+
+
+# ------------------------------------------------------------------ populations
+
+
+def test_population_round_trip_and_manifest(tmp_path, data):
+    out = tmp_path / "pop"
+    assert main(["export", "--population", "7", "--seed", "11", "--distribution", "fruiting-duke",
+                 "--canes", "b2*,b5c3", "--format", "mjcf,urdf", "--out", str(out)]) == 0
+    man = pd.read_csv(out / "manifest.csv", dtype={"push_point": str})
+    head = json.loads((out / "manifest.json").read_text())
+    assert len(man) == 7 and list(man.draw) == list(range(7))
+    assert set(man.seed) == {11} and set(man.distribution) == {"fruiting-duke"}
+    assert set(man.canebench_version) == {__version__} and head["canebench_version"] == __version__
+    assert head["seed"] == 11 and head["population"] == 7 and head["distribution"]["name"] == "fruiting-duke"
+    assert "caliper" in head["what_is_drawn"] and "modulus" in head["what_is_drawn"]
+    assert list(man.cane) == ["b2c1", "b2c2", "b2c3", "b5c3", "b2c1", "b2c2", "b2c3"]  # round robin
+    dist = MODULUS_DISTRIBUTIONS["fruiting-duke"]
+    assert man.modulus_pa.between(dist.lower_pa, dist.upper_pa).all() and man.modulus_pa.nunique() == 7
+    assert not (out / "sdf").exists()
+    canes = {t.cane.id: t.cane for t in data}
+    for row in man.itertuples():
+        # the manifest alone rebuilds the exported chain: the cane, its caliper scales, the modulus
+        base = canes[row.cane]
+        scales = [float(s) for s in row.caliper_scales.split(";")]
+        drawn = dataclasses.replace(base, calipers=tuple(Caliper(c.where, c.diameter * s)
+                                                         for c, s in zip(base.calipers, scales)))
+        chain = build_chain(drawn, row.push_point, ModelConfig(modulus_pa=row.modulus_pa))
+        assert chain.fingerprint() == row.chain_fingerprint
+        assert row.diameter_scale_mean == pytest.approx(
+            sum(c.diameter for c in drawn.calipers) / sum(c.diameter for c in base.calipers), rel=1e-12)
+        k_ref = pinocchio_k(chain)
+        assert abs(mujoco_k(out / row.file_mjcf) / k_ref - 1) < RTOL
+        from canebench.export.urdf import load_sidecar
+
+        assert abs(pybullet_k(out / row.file_urdf, load_sidecar(out / row.file_springs))[0] / k_ref - 1) < RTOL
+
+
+def test_population_is_deterministic_for_a_seed(tmp_path, data):
+    from canebench.export.bundle import export_population, select
+
+    sel = select(data, by_trial=False)
+    a = export_population(sel, ModelConfig(), tmp_path / "a", 6, seed=3)
+    b = export_population(sel, ModelConfig(), tmp_path / "b", 6, seed=3)
+    files = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
+    assert len(files) == 6 * 4 + 2
+    _, mismatch, errors = filecmp.cmpfiles(tmp_path / "a", tmp_path / "b", [str(f) for f in files], shallow=False)
+    assert not mismatch and not errors
+    c = export_population(sel, ModelConfig(), tmp_path / "c", 3, seed=3)  # a draw does not depend on N
+    pd.testing.assert_frame_equal(c.manifest, a.manifest.iloc[:3])
+    d = export_population(sel, ModelConfig(), tmp_path / "d", 6, seed=4)
+    assert not np.array_equal(d.manifest.modulus_pa, a.manifest.modulus_pa)
+    assert a.manifest.equals(b.manifest)
+
+
+def test_what_is_drawn_has_the_documented_distribution(data):
+    """Moments of many draws: E has the named distribution's mean and sd; each caliper moves
+    by sigma = max(caliper sd, the cane's fit residual sd)."""
+    from canebench.export.bundle import select
+    from canebench.export.population import draw_population, fit_residual_sd
+
+    sel = select(data, by_trial=False)[:2]
+    n = 2000
+    draws = draw_population(sel, ModelConfig(), n, seed=5, distribution="dormant", caliper_sd_m=0.2e-3)
+    E = np.array([d.record["modulus_pa"] for d in draws])
+    dist = MODULUS_DISTRIBUTIONS["dormant"]
+    assert abs(E.mean() - dist.mean_pa) < 4 * dist.sd_pa / np.sqrt(n)
+    assert abs(E.std(ddof=1) / dist.sd_pa - 1) < 0.08
+    for k, (cane, _) in enumerate(sel):
+        sigma = max(0.2e-3, fit_residual_sd(cane, ModelConfig()))
+        d0 = np.array([c.diameter for c in cane.calipers])
+        dd = np.array([[c.diameter for c in d.cane.calipers] for d in draws[k::2]]) - d0
+        assert np.all(np.abs(dd.mean(axis=0)) < 4 * sigma / np.sqrt(len(dd)))
+        assert np.all(np.abs(dd.std(axis=0, ddof=1) / sigma - 1) < 0.1)
+        assert draws[k].record["caliper_sd_m"] == sigma
+        assert all(d.config.modulus_pa == d.record["modulus_pa"] for d in draws[k::2])
+
+
+# ------------------------------------------------------------------ bad input
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--format", "mjcf,obj"], "unknown export format 'obj'"),
+    (["--format", "urfd"], "did you mean 'urdf'"),
+    (["--population", "0"], "--population"),
+    (["--population", "-3"], "must be >= 1"),
+    (["--population", "ten"], "whole number"),
+    (["--population", "2", "--seed", "-1"], "--seed"),
+    (["--population", "2", "--distribution", "winter"], "winter"),
+    (["--population", "2", "--modulus", "3e9"], "draws the modulus"),
+    (["--distribution", "dormant"], "need --population"),
+    (["--canes", "b1c1", "--push", "9"], "no push point with id '9'"),
+    (["--trials", "b1c1t1", "--push", "2"], "--push"),
+    (["--canes", "zz*"], "no trial matches"),
+    (["--set", "stiffness_formula=dual-length"], "did you mean 'dual_length'"),
+    (["--model", "/nonexistent/model.yaml"], "model file not found"),
+])
+def test_bad_input_is_a_clear_error(tmp_path, capsys, argv, says):
+    out = tmp_path / "x"
+    assert main(["export", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "canebench: error:" in err and says in err, err
+    assert not (out / "manifest.csv").exists()
+
+
+def test_trials_and_canes_are_exclusive(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["export", "--trials", "b1c1t1", "--canes", "b1c1"])
+    assert exc.value.code == 2 and "not allowed with" in capsys.readouterr().err
+
+
+def test_bench_export_reports_both_runs(capsys):
+    """The benchmark runs (no timing asserted): one single export and a population, with ratios."""
+    from canebench.studies.bench import bench_export
+
+    df = bench_export(population=3, formats="mjcf")
+    assert list(df.index) == ["single", "population"] and list(df.canes) == [1, 3]
+    assert df.loc["single", "vs_single"] == 1.0 and (df.wall_s > 0).all()
+    assert "population of 3" in capsys.readouterr().out
