@@ -24,13 +24,18 @@ def test_bundled_layout_matches_the_field_campaign(bundled_trials):
 
 def test_scoring_code_never_reads_the_truth():
     # the hidden stiffness truth of the bundled set is read by no code at all; the contact
-    # study reads its detection truth only to score detections after they are made
+    # study and the discovery self-test read their truth only to grade answers already made
+    graders = {("studies", "contact.py"), ("discovery", "selftest.py")}
     for pkg in ("harness", "backends", "reports"):
         for f in (REPO / pkg).rglob("*.py"):
             text = f.read_text()
             assert "synthetic-truth" not in text, f
-            if f.name != "contact.py" or f.parent.name != "studies":
+            if (f.parent.name, f.name) not in graders:
                 assert "truth.json" not in text, f
+    # the discovery workflow itself never opens a truth file
+    for f in (REPO / "harness" / "discovery").glob("*.py"):
+        if f.name != "selftest.py":
+            assert "truth" not in f.read_text().replace("truthful", ""), f
 
 
 def test_synthetic_trial_files_do_not_look_like_field_copies():
