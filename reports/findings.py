@@ -22,6 +22,9 @@ PAPER = {
     "sweep": "in most cases a reasonable model lies in the sweep's parameter space, but not the same for every cane",
     "protocol": "setpoint +0.5 mm every second, 90 s per trial (0.5 mm/s)",
     "spacing": "push points about four inches (102 mm) apart, trial 1 the highest",
+    "contact": "IMU contact detection: 12 trials with contact; 41 full, 11 partial, 2 excluded",
+    "truncation": "a trial with contact is truncated at the contact (a partial trial)",
+    "engines": "(one engine, MuJoCo, in the paper)",
 }
 
 
@@ -81,10 +84,30 @@ def findings(run_dir: Path) -> list[tuple[str, str, str]]:
             rows.append(("where the error lies", f"{share:.0%} of the log-ratio variance lies between canes (the "
                          f"error is a property of the cane); Spearman rho of |ln ratio| with caliper diameter "
                          f"{rho:.2f}", "a local diameter is insufficient; lower points rely on extrapolated diameters"))
+    if (run_dir / "naive_truncation.csv").exists():
+        for r in pd.read_csv(run_dir / "naive_truncation.csv").itertuples():
+            rows.append(("truncation rule", f"{r.backend}: {r.partial} partial trials scored up to the contact; "
+                         f"median |ln ratio| {r.median_abs_log_ratio_whole:.2f} whole, "
+                         f"{r.median_abs_log_ratio_truncated:.2f} with the rule ({r.scored_truncated} trials scored)",
+                         PAPER["truncation"]))
     if (run_dir / "morris_ranking.csv").exists():
         r = pd.read_csv(run_dir / "morris_ranking.csv").sort_values(["backend", "rank"])
         for b, g in r.groupby("backend"):
             rows.append(("Method of Morris", f"{b}: " + " > ".join(g.factor), PAPER["morris"]))
+        if (run_dir / "morris_engines.csv").exists():
+            from canebench.studies.paper import morris_engine_sentence
+
+            rows.append(("Method of Morris across engines",
+                         morris_engine_sentence(pd.read_csv(run_dir / "morris_engines.csv")), PAPER["engines"]))
+    if (run_dir / "contact_meta.json").exists():
+        m = json.loads((run_dir / "contact_meta.json").read_text())
+        c = m["counts"]
+        ev, evt = m.get("force_events", {}), m.get("force_event_trials", {})
+        rows.append(("contact detection", f"{m['primary_method']} detector: {c['full']} full, {c['partial']} "
+                     f"partial, {c['excluded']} excluded of {m['n_trials']}; force-only events: "
+                     f"{ev.get('stiffening', 0)} stiffening elbows ({evt.get('stiffening', 0)} trials), "
+                     f"{ev.get('softening', 0)} softening ({evt.get('softening', 0)} trials), {ev.get('drop', 0)} "
+                     f"slips over 30 gf ({evt.get('drop', 0)} trials)", PAPER["contact"]))
     if (run_dir / "sweep_summary.json").exists():
         for b, v in json.loads((run_dir / "sweep_summary.json").read_text()).items():
             rows.append(("parameter sweep", f"{b}: best point at the highest modulus (8.05 GPa) on "

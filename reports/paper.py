@@ -122,14 +122,57 @@ def paper_sections(run_dir: Path) -> str:
         if (run_dir / "naive_variance.csv").exists():
             parts.append("<h3>Share of the log-ratio variance between canes</h3>"
                          + _fmt(pd.read_csv(run_dir / "naive_variance.csv")))
+        if (run_dir / "naive_truncation.csv").exists():
+            tr = pd.read_csv(run_dir / "naive_truncation.csv")
+            parts.append("<h3>The truncation rule: partial trials scored up to the contact</h3><p>Run with "
+                         "<code>--truncate-contacts</code>: a trial with a detected contact (the IMU rule where a log "
+                         "exists, else the force-only detector) is scored only up to it, its field slope from the "
+                         "partial trial and its simulation pushed as far; the whole trials are scored too. "
+                         + " ".join(f"{r.backend}: {r.partial} partial trials ({r.partial_unscorable} too short to "
+                                    f"score); median |ln ratio| {r.median_abs_log_ratio_whole:.3f} over {r.scored_whole} "
+                                    f"whole trials, {r.median_abs_log_ratio_truncated:.3f} over {r.scored_truncated} "
+                                    f"with the rule (on the partial trials alone {r.partial_median_abs_whole:.3f} -> "
+                                    f"{r.partial_median_abs_truncated:.3f})." for r in tr.itertuples())
+                         + f"</p>{_fmt(tr)}")
     if (run_dir / "morris.csv").exists():
         idx = pd.read_csv(run_dir / "morris.csv")
         morris_figure(idx, run_dir / "morris.png")
         rank = pd.read_csv(run_dir / "morris_ranking.csv") if (run_dir / "morris_ranking.csv").exists() else None
+        from canebench.studies.paper import morris_engine_comparison, morris_engine_sentence
+
+        engines = pd.read_csv(run_dir / "morris_engines.csv") if (run_dir / "morris_engines.csv").exists() \
+            else morris_engine_comparison(idx)
+
+        cmp = ""
+        if rank is not None and len(rank):
+            piv = rank.pivot(index="factor", columns="backend", values="rank").sort_values(rank.backend.iloc[0])
+            cmp = f"<h3>Does the ranking change between engines?</h3><p>{morris_engine_sentence(engines)}</p>"
+            cmp += "<p>Rank of each factor (1 = largest mean mu*) per engine:</p>" + piv.to_html()
+            if engines is not None and len(engines):
+                cmp += _fmt(engines.drop(columns=["overall_order"]))
+        cost = ""
+        runs = pd.read_csv(run_dir / "morris_runs.csv") if (run_dir / "morris_runs.csv").exists() else pd.DataFrame()
+        if "cpu_s" not in runs and (run_dir / "results.csv").exists() and (run_dir / "run.json").exists():
+            try:  # written before morris_runs.csv carried the CPU: the run's own table, if it is this study's
+                if json.loads((run_dir / "run.json").read_text()).get("study") == "morris":
+                    runs = pd.read_csv(run_dir / "results.csv")
+            except ValueError:
+                pass
+        if len(runs):
+            if "cpu_s" in runs and runs.cpu_s.notna().any():
+                c = runs.groupby("backend").agg(runs=("cpu_s", "size"), cpu_s=("cpu_s", "sum"),
+                                                cpu_per_run_s=("cpu_s", "mean"), failed=(
+                                                    "status", lambda v: int(v.isin(["failed", "timeout"]).sum())))
+                c["vs_pinocchio"] = c.cpu_per_run_s / c.cpu_per_run_s.get("pinocchio", np.nan)
+                cost = ("<h3>What this study cost per engine (CPU seconds of the jobs, as run)</h3>"
+                        + c.reset_index().to_html(index=False, float_format=lambda v: f"{v:.3g}")
+                        + "<p><code>canebench bench --morris</code> times the same study per engine on a subset "
+                          "and extrapolates it to 1,040 runs, with the paper (40 kHz) protocol's estimate.</p>")
         parts.append("<h2>Method of Morris</h2><p>Segments 3-20, probe angle -30..30 degrees, modulus "
                      "1.82-8.05 GPa, diameter factor 0-1; 6 levels, 4 trajectories (SALib, fixed seed); one "
                      "analysis per trial and engine on the simulated stiffness.</p><img src='morris.png'>"
-                     + (f"<h3>Factor ranking by mean mu* per engine</h3>{_fmt(rank)}" if rank is not None else ""))
+                     + (f"<h3>Factor ranking by mean mu* per engine</h3>{_fmt(rank)}" if rank is not None else "")
+                     + cmp + cost)
     if (run_dir / "sweep_best.csv").exists():
         best = pd.read_csv(run_dir / "sweep_best.csv")
         sweep_figure(best, naive, run_dir / "sweep.png")

@@ -6,7 +6,7 @@ import argparse
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    be = sub.add_parser("bench", help="benchmarks: protocols, beam sweep, engines' CPU time, job runner overhead")
+    be = sub.add_parser("bench", help="benchmarks: protocols, beam sweep, engines' CPU time, job runner overhead, Morris per engine")
     be.add_argument("--trials", help="trial globs on the bundled dataset")
     be.add_argument("--beam", action="store_true", help="time the beam backend's full 90-step sweep instead")
     be.add_argument("--engines", action="store_true",
@@ -19,7 +19,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     be.add_argument("--export", action="store_true",
                     help="time an exported population (--population N, default 100) against one single export")
     be.add_argument("--population", type=int, default=100, help="canes for --export (default 100)")
-    be.add_argument("--backends", default="mujoco", help="comma-separated; MuJoCo is always included as the baseline")
+    be.add_argument("--morris", action="store_true",
+                    help="Method of Morris per engine on a subset of trials, extrapolated to a 1,040-run study, "
+                         "ratios to Pinocchio, and the same study's estimate on the paper's 40 kHz protocol")
+    be.add_argument("--field", help="--morris: dataset (default: the bundled synthetic set)")
+    be.add_argument("--n-trials", type=int, default=2,
+                    help="--morris: usable trials in the subset, spread over the dataset (default 2; --trials "
+                         "overrides)")
+    be.add_argument("--paper-runs", type=int, default=3,
+                    help="--morris: MuJoCo runs timed on the paper protocol (default 3; 0: skip)")
+    be.add_argument("--paper-steps", type=int, default=2,
+                    help="--morris: setpoints of each paper-protocol run actually simulated (default 2)")
+    be.add_argument("--workers", type=int, default=2, help="--morris: cores for the ideal wall time (default 2)")
+    be.add_argument("--backends", default=None,
+                    help="comma-separated; MuJoCo is always included as the baseline (--morris: Pinocchio, and "
+                         "the default there is the five chain engines)")
     be.add_argument("--steps", type=int, default=None, help="protocol steps per trial (default: full trial)")
     be.set_defaults(fn=main)
 
@@ -27,6 +41,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def main(a: argparse.Namespace) -> int:
     from ..studies import bench
 
+    if a.morris:
+        bench.bench_morris(backends=a.backends.split(",") if a.backends else None, data=a.field, trials=a.trials,
+                           n_trials=a.n_trials, paper_runs=a.paper_runs, paper_steps=a.paper_steps,
+                           workers=a.workers)
+        return 0
+    a.backends = a.backends or "mujoco"
     if a.beam:
         bench.bench_beam(trials=a.trials or "b1c1t1,b3c1t2,b5c3t1,b6c2t3")
     elif a.engines:

@@ -24,6 +24,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     common.add_data_options(st)
     st.add_argument("--backends", default="pinocchio", help="engines for naive/morris/sweep (default pinocchio)")
     st.add_argument("--protocol", default="fast")
+    st.add_argument("--truncate-contacts", action="store_true",
+                    help="naive/morris/sweep: score a trial with a detected contact only up to the contact (the "
+                         "paper's partial trials; IMU rule where logged, else the force-only detector); naive "
+                         "then reports the error with and without the rule")
     st.add_argument("--out", help="run folder (default canebench-runs/study-<name>-<time>); an existing one resumes")
     st.add_argument("--no-report", action="store_true")
     common.add_executor_options(st)
@@ -36,14 +40,27 @@ def main(a: argparse.Namespace) -> int:
     out = common.out_dir(a.out, f"study-{a.name}")
     t0 = time.perf_counter()
     code = 0
+    if a.name in ("contact", "modulus") and (a.executor != "local" or a.fresh or a.truncate_contacts):
+        print(f"note: study {a.name} runs in process (no simulation, nothing to resume): --executor, --fresh and "
+              "--truncate-contacts do not apply", file=sys.stderr)
     if a.name == "contact":
         from canebench import canes
 
         data = Path(a.field) if a.field else Path(canes.__file__).resolve().parent / "synthetic-contact"
         res = STUDIES["contact"](data, out)
         meta = res.meta
-        print(f"canebench study contact: {data} -> {out}")
-        print(json.dumps({k: meta[k] for k in meta if k in ("counts", "paper", "events")}, indent=1, default=str))
+        print(f"canebench study contact: {data} -> {out} (in process: no simulation)")
+        print(json.dumps({k: meta[k] for k in meta if k in ("counts", "paper", "force_events", "force_event_trials",
+                                                            "force_partial", "force_partial_by_cause")},
+                         indent=1, default=str))
+        part = res.trials[res.trials.status != "full"]
+        if len(part):
+            print("partial / excluded trials:")
+            print(part[["trial", "method", "status", "cause", "contact_mm", "kept_samples", "n_rig", "k_field_full",
+                        "k_field_partial"]].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+        if res.sensitivity is not None:
+            print("force-only counts by detector setting:")
+            print(res.sensitivity.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
         if (out / "contact_scores.json").exists():
             print("against the dataset's truth:", (out / "contact_scores.json").read_text())
     elif a.name == "modulus":
@@ -71,7 +88,7 @@ def main(a: argparse.Namespace) -> int:
         print(f"canebench study {a.name}: {len(trials)} trials from {data_dir}, backends {','.join(usable)} -> {out}")
         common.sigterm_as_interrupt()
         res = STUDIES[a.name](trials, usable, out, ex, proto, common.progress(a), meta,
-                              timeout_s=a.timeout or None, fresh=a.fresh)
+                              timeout_s=a.timeout or None, fresh=a.fresh, truncate_contacts=a.truncate_contacts)
         print(f"done in {time.perf_counter() - t0:.1f} s: {res.outcome.summary()}")
         _print(a.name, res)
         if res.outcome.interrupted:
@@ -93,8 +110,16 @@ def _print(name: str, res) -> None:  # noqa: ANN001
                   f"{g.log_ratio.min():.2f}..{g.log_ratio.max():.2f} over {len(g)} trials")
         print(res.variance.to_string(index=False, float_format=f))
         print(res.by_rank.to_string(index=False, float_format=f))
+        if res.truncation is not None:
+            print("truncation rule (partial trials scored up to the contact), naive-case error with and without:")
+            print(res.truncation.to_string(index=False, float_format=f))
     elif name == "morris":
         print(res.ranking.to_string(index=False, float_format=f))
+        if res.engines is not None and len(res.engines):
+            from ..studies.paper import morris_engine_sentence
+
+            print(res.engines.drop(columns=["overall_order"]).to_string(index=False, float_format=f))
+            print(morris_engine_sentence(res.engines))
     elif name == "sweep":
         for b, v in res.summary.items():
             print(f"  {b}: {v}")

@@ -1,7 +1,8 @@
 """The probe driver: one protocol, applied identically to every backend.
 
 The harness owns the setpoint schedule, the PID law (or hands the gains to an
-engine's implicit PID), the sampling, the force-limit stop and the checks
+engine's implicit PID), the sampling, the force-limit stop (and, with a
+protocol fit window, the stop once the probe is past it) and the checks
 that mark a trial failed: non-finite state, an engine's own divergence flag,
 runaway force or displacement, and chatter (probe still moving fast at the
 end of a step, which is how PyBullet's velocity clamp hides an explosion).
@@ -70,6 +71,17 @@ def _check(proto: Protocol, k: int, x: float, v: float, f: float, setpoint: floa
                        "stiff for the protocol's PID; check the input's units)")
 
 
+def _past_window(proto: Protocol, x: float) -> bool:
+    """The probe is past the protocol's fit window: no later sample enters the slope.
+
+    The stiffness is fitted over the samples within ``fit_window_mm`` of the start
+    (:meth:`ProbeTrace.fit`, as the field fit counts from the onset); a push
+    pressed on past that only costs time. The sample that crossed is kept (the
+    trace shows where the push stopped). Without a window, never.
+    """
+    return proto.fit_window_mm is not None and x > proto.fit_window_mm * 1e-3 + 1e-12
+
+
 def _check_range(tr: "ProbeTrace", proto: Protocol) -> None:
     """A slope needs the probe to have moved: at least a fifth of one protocol step.
 
@@ -97,7 +109,7 @@ def probe_static(model: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
             tr.displacement.append(sp)
             tr.force.append(f)
             tr.setpoint.append(sp)
-            if f >= proto.force_limit_n:
+            if f >= proto.force_limit_n or _past_window(proto, sp):
                 break
     except Diverged as exc:
         tr.fail(str(exc))
@@ -155,7 +167,7 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
             tr.displacement.append(float(x))
             tr.force.append(float(f))
             tr.setpoint.append(sp)
-            if f >= proto.force_limit_n:
+            if f >= proto.force_limit_n or _past_window(proto, x):
                 break
     except Diverged as exc:
         tr.fail(str(exc))

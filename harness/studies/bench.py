@@ -1,5 +1,9 @@
 """Benchmarks measured in one process: ratios, never absolute thresholds.
 
+``bench_morris`` times a Method of Morris study per engine on a subset of
+trials and extrapolates it to a whole study (1,040 runs), with ratios to
+Pinocchio and the paper (40 kHz) protocol's estimate from a few MuJoCo runs.
+
 ``bench_protocols`` probes a few bundled trials with every requested backend
 under the paper protocol (40 kHz) and the fast one, and prints per trial:
 the stiffness and its difference from the Pinocchio static answer, the
@@ -10,7 +14,9 @@ MuJoCo's in the same run and protocol, and each engine's paper/fast speed-up.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from ..model.chain import build_chain
@@ -236,3 +242,153 @@ def bench_export(population: int = 100, seed: int = 0, formats: str = "mjcf,sdf,
     print(f"population of {population}: {pop:.2f} s ({pop / population * 1e3:.1f} ms per cane, "
           f"{df.per_cane_s['population'] / single:.2f}x one single export per cane)")
     return df
+
+
+#: the issue's targets for one Method of Morris study over all usable real trials (wall time, 2 cores)
+MORRIS_RUNS = 1040  # 52 usable trials x 20 design points
+MORRIS_TARGETS_S = {"pinocchio": 30.0, "mujoco": 180.0}
+MORRIS_ALL_TARGET_S = 900.0
+CHAIN_ENGINES = ("pinocchio", "mujoco", "pybullet", "exudyn", "dart")
+
+
+def _spread(items: list, n: int) -> list:
+    """``n`` items evenly spread over ``items`` (deterministic)."""
+    if n >= len(items):
+        return list(items)
+    idx = np.unique(np.linspace(0, len(items) - 1, n).round().astype(int))
+    return [items[i] for i in idx]
+
+
+def bench_morris(backends: list[str] | None = None, data: str | None = None, trials: str | None = None,
+                 n_trials: int = 2, paper_runs: int = 3, paper_steps: int = 2, runs: int = MORRIS_RUNS,
+                 workers: int = 2) -> pd.DataFrame:
+    """CPU time of the Method of Morris per engine on a subset, extrapolated to a whole study.
+
+    Every job of the subset (``n_trials`` usable trials spread over the dataset,
+    or ``trials``, x the 20 points of the Morris design) runs through the
+    study's own job function (:func:`canebench.execute.pipeline.run_job`:
+    chain, probe, fit) serially in this process, so the numbers are the
+    engines' cost without pool overhead. Pinocchio always runs, first: every
+    ratio is to Pinocchio measured here. The study estimate is the mean CPU
+    per run x ``runs`` (1,040: 52 usable trials x 20 points), and its ideal
+    wall time on ``workers`` cores is that over ``workers``.
+
+    The paper's 40 kHz protocol: ``paper_runs`` MuJoCo jobs of the subset
+    (spread over segment counts) run ``paper_steps`` setpoints under the paper
+    protocol; its cost per setpoint is fixed (40,000 steps), so the full run
+    costs that x the setpoints the fast run made (same stop rule). The ratio
+    paper/fast over those jobs, applied to the MuJoCo fast estimate, gives the
+    paper-protocol study time.
+    """
+    import time
+
+    from ..execute.pipeline import field_stage, make_jobs, run_job
+    from ..registry import discover
+    from .paper import morris_configs
+
+    reg = discover()
+    wanted = list(backends or CHAIN_ENGINES)
+    usable = [b for b in dict.fromkeys(["pinocchio", *wanted]) if b in reg and reg[b].available]
+    skipped = [b for b in wanted if b not in usable]
+    d = Path(data) if data else bundled_dataset()
+    all_trials = load_dataset(d, trials)
+    fields = field_stage(all_trials)
+    ok_trials = [t for t in all_trials if fields[t.id].fit is not None and fields[t.id].fit.usable]
+    proto = PROTOCOLS["fast"]
+    steps = {t.id: fields[t.id].n_steps(proto) for t in ok_trials}
+    # spread over the trials' lengths (setpoints): short stiff pushes and long soft ones
+    subset = ok_trials if trials else _spread(sorted(ok_trials, key=lambda t: (steps[t.id], t.id)), n_trials)
+    mean_steps = float(np.mean(list(steps.values())))
+    _, configs = morris_configs()
+    pairs = [(t, c) for t in subset for c in configs]
+    print(f"Method of Morris benchmark: {len(subset)} usable trial(s) of {d} ({', '.join(t.id for t in subset)}) x "
+          f"{len(configs)} design points = {len(pairs)} runs per engine, fast protocol, serial, one process; "
+          f"{len(ok_trials)} usable trials here ({len(ok_trials) * len(configs)} runs), the issue's study: {runs}")
+    for b in skipped:
+        print(f"  skipping {b}: not available")
+    rows, mj_jobs = [], []
+    for b in usable:
+        jobs = make_jobs([t for t, _ in pairs], [b], proto, [c for _, c in pairs], fields)
+        setpoints = sum(j.n_steps for j in jobs)
+        cpu, failed, n_samples = [], 0, []
+        t0 = time.perf_counter()
+        for j in jobs:
+            r = run_job(j)
+            cpu.append(r.row["cpu_s"])
+            failed += r.row["status"] != "ok"
+            n_samples.append(r.row.get("n_samples", 0))
+            if b == "mujoco":
+                mj_jobs.append((j, r.row["cpu_s"], r.row.get("n_samples", 0), r.row.get("n_links", 0)))
+        wall = time.perf_counter() - t0
+        mean = float(np.mean(cpu))
+        # a run costs in proportion to its setpoints (fixed steps each): weight by the dataset's trial lengths
+        study = float(np.sum(cpu)) / setpoints * mean_steps * runs
+        rows.append({"backend": b, "runs": len(jobs), "failed": failed, "cpu_per_run_s": mean,
+                     "cpu_max_s": float(np.max(cpu)), "wall_s": wall, "study_cpu_s": study,
+                     f"study_wall_{workers}cores_s": study / workers})
+        print(f"  {b:10s} {len(jobs)} runs, {failed} failed, {mean:.3f} s CPU per run (max {np.max(cpu):.2f})",
+              flush=True)
+    df = pd.DataFrame(rows).set_index("backend")
+    df["vs_pinocchio"] = df.cpu_per_run_s / df.loc["pinocchio", "cpu_per_run_s"]
+    wcol = f"study_wall_{workers}cores_s"
+    df["target_s"] = [MORRIS_TARGETS_S.get(b, np.nan) for b in df.index]
+    df["meets_target"] = [("yes" if w < t else "no") if np.isfinite(t) else "" for w, t in zip(df[wcol], df.target_s)]
+    pd.set_option("display.width", 200)
+    print(f"\nper engine: CPU per run here; a {runs}-run study's CPU (CPU per setpoint x the dataset's mean "
+          f"{mean_steps:.1f} setpoints per trial x {runs}) and ideal wall time on {workers} cores (CPU / cores); "
+          "ratio to Pinocchio in this process; the issue's target:")
+    print(df.to_string(float_format=lambda v: f"{v:.3g}"))
+    engines = [b for b in CHAIN_ENGINES if b in df.index]
+    total = float(df.loc[engines, wcol].sum())
+    print(f"all {len(engines)} chain engines ({', '.join(engines)}): {total:.0f} s = {total / 60:.1f} min on "
+          f"{workers} cores (target: all five under {MORRIS_ALL_TARGET_S / 60:.0f} min"
+          f"{'' if len(engines) == len(CHAIN_ENGINES) else '; not all five measured'})")
+    if paper_runs > 0 and "mujoco" in reg and reg["mujoco"].available:
+        df.attrs["paper"] = _paper_estimate(mj_jobs, pairs, fields, paper_runs, paper_steps,
+                                            df.loc["mujoco", "study_cpu_s"] if "mujoco" in df.index else None,
+                                            runs, workers, mean_steps)
+    return df
+
+
+def _paper_estimate(mj_jobs: list, pairs: list, fields: dict, paper_runs: int, paper_steps: int,
+                    fast_study_cpu: float | None, runs: int, workers: int, mean_steps: float) -> dict:
+    """MuJoCo under the paper protocol: a few runs' first setpoints, scaled to whole runs and to the study."""
+    import time
+
+    from ..execute.pipeline import make_jobs, run_job
+
+    proto = PROTOCOLS["paper"]
+    if not mj_jobs:  # MuJoCo not benchmarked: its fast runs for the sampled jobs, here
+        for j in make_jobs([t for t, _ in pairs], ["mujoco"], PROTOCOLS["fast"], [c for _, c in pairs], fields):
+            r = run_job(j)
+            mj_jobs.append((j, r.row["cpu_s"], r.row.get("n_samples", 0), r.row.get("n_links", 0)))
+    pick = _spread(sorted(mj_jobs, key=lambda r: (r[3], r[0].trial.id)), paper_runs)
+    backend = get_backend("mujoco")
+    fast_cpu = paper_cpu = 0.0
+    rows = []
+    for job, cpu_fast, n_fast, links in pick:
+        chain = build_chain(job.trial.cane, job.trial.push_id, job.config)
+        c0 = time.process_time()
+        tr = run_probe(backend, chain, proto, paper_steps)
+        per_step = (time.process_time() - c0) / max(len(tr.force), 1)
+        est = per_step * max(n_fast, 1)
+        rows.append({"trial": job.trial.id, "links": links, "fast_cpu_s": cpu_fast, "setpoints": n_fast,
+                     "paper_cpu_per_setpoint_s": per_step, "paper_run_est_s": est, "paper/fast": est / cpu_fast,
+                     "status": tr.status})
+        fast_cpu += cpu_fast
+        paper_cpu += est
+    t = pd.DataFrame(rows)
+    ratio = paper_cpu / fast_cpu
+    print(f"\nMuJoCo, paper protocol (40 kHz, harness PID): {len(t)} runs timed over their first {paper_steps} "
+          "setpoint(s), scaled to the setpoints of the same fast run:")
+    print(t.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    out = {"paper_over_fast": ratio, "runs": t.to_dict("records")}
+    if fast_study_cpu is None:  # MuJoCo was not among the engines: its fast runs of the subset, timed above
+        fast_study_cpu = sum(r[1] for r in mj_jobs) / sum(r[0].n_steps for r in mj_jobs) * mean_steps * runs
+    if fast_study_cpu is not None:
+        est = ratio * fast_study_cpu
+        out.update(study_cpu_s=est, study_wall_s=est / workers)
+        print(f"paper/fast CPU ratio {ratio:.0f}x: the {runs}-run Morris study on the paper protocol would take "
+              f"{est / 3600:.1f} h of MuJoCo CPU ({est / workers / 3600:.1f} h on {workers} cores), against "
+              f"{fast_study_cpu / workers / 60:.1f} min on the fast protocol (the issue estimated ~11 h)")
+    return out

@@ -43,12 +43,30 @@ MORRIS_LEVELS, MORRIS_TRAJECTORIES, MORRIS_SEED = 6, 4, 20240515
 SWEEP_LEVELS = 5
 
 
+def study_fields(trials: list, proto: Protocol, truncate_contacts: bool = False) -> dict:
+    """Field stiffness of each distinct trial: whole trials, or under the contact truncation rule."""
+    unique = list({t.id: t for t in trials}.values())
+    if truncate_contacts:
+        from .contact import contact_fields
+
+        return contact_fields(unique, proto.fit_window_mm)
+    return field_stage(unique, proto.fit_window_mm)
+
+
 def _run(trials: list, backends: list[str], configs: list[ModelConfig], labels: list[dict[str, Any]],
          out: Path, executor: Executor | None, protocol: Protocol | None, progress: Progress | None,
-         meta: dict[str, Any], **kw: Any) -> RunOutcome:
+         meta: dict[str, Any], truncate_contacts: bool = False, fields: dict | None = None,
+         **kw: Any) -> RunOutcome:
+    """Jobs for (trial, configuration) pairs on every backend, through the runner (resumable in ``out``).
+
+    With ``truncate_contacts`` a trial with a detected contact is scored only up to
+    it (:func:`canebench.studies.contact.contact_fields`): its field stiffness is the
+    partial trial's and its simulation pushes only as far.
+    """
     proto = protocol or PROTOCOLS["fast"]
-    fields = field_stage({t.id: t for t in trials}.values(), proto.fit_window_mm)
+    fields = fields if fields is not None else study_fields(trials, proto, truncate_contacts)
     jobs = make_jobs(trials, backends, proto, configs, fields, labels=labels)
+    meta = {**meta, "truncate_contacts": bool(truncate_contacts)}
     return run_jobs(jobs, out, executor, fields=fields, progress=progress, meta=meta, with_traces=False, **kw)
 
 
@@ -69,6 +87,7 @@ class NaiveResult:
     by_rank: pd.DataFrame  # |log ratio| by push-height rank (1 = highest) and engine
     variance: pd.DataFrame  # share of the log-ratio variance between canes, per engine
     outcome: RunOutcome
+    truncation: pd.DataFrame | None = None  # with truncate_contacts: the error with and without the rule
 
     def to_df(self) -> pd.DataFrame:
         return self.table
@@ -76,15 +95,45 @@ class NaiveResult:
 
 def naive_case(trials: list, backends: list[str], out: Path, executor: Executor | None = None,
                protocol: Protocol | None = None, progress: Progress | None = None,
-               meta: dict[str, Any] | None = None, **kw: Any) -> NaiveResult:
-    """The paper's naive case on every engine; writes ``naive.csv``, ``naive_by_rank.csv``, ``naive_variance.csv``."""
+               meta: dict[str, Any] | None = None, truncate_contacts: bool = False, **kw: Any) -> NaiveResult:
+    """The paper's naive case on every engine; writes ``naive.csv``, ``naive_by_rank.csv``, ``naive_variance.csv``.
+
+    With ``truncate_contacts`` every trial with a detected contact is scored only up
+    to it (a partial trial, the paper's rule), and the whole trials are scored too
+    (same store: the unchanged trials are not simulated twice): ``naive.csv`` holds
+    the partial-trial scores beside the whole-trial ones (``k_field_full``,
+    ``log_ratio_full``) and ``naive_truncation.csv`` the error with and without the rule.
+    """
     cfg = PRESETS["paper"]
-    outcome = _run(trials, backends, [cfg] * len(trials), [{"study": "naive"}] * len(trials), out, executor,
-                   protocol, progress, {**(meta or {}), "study": "naive", "model_config": cfg.to_dict()}, **kw)
-    res = outcome.results
+    proto = protocol or PROTOCOLS["fast"]
     cols = ["trial", "bush", "cane", "push_point", "backend", "height_mm", "diameter_mm", "k_sim", "k_field",
             "log_ratio", "status", "reason"]
+    base_meta = {**(meta or {}), "study": "naive", "model_config": cfg.to_dict()}
+    full = None
+    if truncate_contacts:  # the whole trials first: the comparison, and most of the jobs
+        full = _run(trials, backends, [cfg] * len(trials), [{"study": "naive"}] * len(trials), out, executor, proto,
+                    progress, base_meta, **kw)
+        if full.interrupted:
+            return NaiveResult(full.results.reindex(columns=cols), pd.DataFrame(), pd.DataFrame(), full)
+        kw = {**kw, "fresh": False}  # the second pass must reuse what the first stored
+    fields = study_fields(trials, proto, truncate_contacts)
+    outcome = _run(trials, backends, [cfg] * len(trials), [{"study": "naive"}] * len(trials), out, executor, proto,
+                   progress, base_meta, truncate_contacts=truncate_contacts, fields=fields, **kw)
+    res = outcome.results
     table = res[cols].copy()
+    truncation = None
+    if full is not None:
+        partial = {t for t, fr in fields.items()
+                   if fr.fit is None and fr.reason.startswith("excluded")
+                   or fr.fit is not None and any(fl.startswith("partial trial") for fl in fr.fit.flags)}
+        table["partial"] = table.trial.isin(partial)
+        f = full.results.set_index(["trial", "backend"])
+        key = list(zip(table.trial, table.backend))
+        table["k_field_full"] = [f.k_field.get(k, np.nan) for k in key]
+        table["k_sim_full"] = [f.k_sim.get(k, np.nan) for k in key]
+        table["log_ratio_full"] = [f.log_ratio.get(k, np.nan) if f.status.get(k) == "ok" else np.nan for k in key]
+        truncation = truncation_summary(table)
+        _save(truncation, out / "naive_truncation.csv")
     # push-height rank within each cane: 1 = the highest push point
     table["height_rank"] = table.groupby(["cane", "backend"]).height_mm.rank(ascending=False, method="first")
     ok = table[table.status == "ok"].copy()
@@ -95,7 +144,25 @@ def naive_case(trials: list, backends: list[str], out: Path, executor: Executor 
     _save(table, out / "naive.csv")
     _save(by_rank, out / "naive_by_rank.csv")
     _save(variance, out / "naive_variance.csv")
-    return NaiveResult(table, by_rank, variance, outcome)
+    return NaiveResult(table, by_rank, variance, outcome, truncation)
+
+
+def truncation_summary(table: pd.DataFrame) -> pd.DataFrame:
+    """Per engine: the naive-case error over whole trials against the error under the truncation rule."""
+    rows = []
+    for b, g in table.groupby("backend"):
+        whole = g.log_ratio_full.dropna()
+        trunc = g.log_ratio[g.status == "ok"].dropna()
+        part = g[g.partial]
+        both = part.dropna(subset=["log_ratio", "log_ratio_full"])
+        rows.append({"backend": b, "trials": len(g), "partial": int(len(part)),
+                     "partial_unscorable": int(part.log_ratio.isna().sum()),
+                     "scored_whole": len(whole), "scored_truncated": len(trunc),
+                     "median_abs_log_ratio_whole": float(whole.abs().median()) if len(whole) else np.nan,
+                     "median_abs_log_ratio_truncated": float(trunc.abs().median()) if len(trunc) else np.nan,
+                     "partial_median_abs_whole": float(both.log_ratio_full.abs().median()) if len(both) else np.nan,
+                     "partial_median_abs_truncated": float(both.log_ratio.abs().median()) if len(both) else np.nan})
+    return pd.DataFrame(rows)
 
 
 def variance_between(df: pd.DataFrame, group: str, value: str = "log_ratio") -> dict[str, float]:
@@ -140,6 +207,7 @@ class MorrisResult:
     runs: pd.DataFrame  # every simulated point (morris_runs.csv)
     ranking: pd.DataFrame  # factor ranking by mean mu* per engine
     outcome: RunOutcome
+    engines: pd.DataFrame | None = None  # does the ranking change between engines (morris_engines.csv)
 
     def to_df(self) -> pd.DataFrame:
         return self.indices
@@ -147,7 +215,8 @@ class MorrisResult:
 
 def morris_study(trials: list, backends: list[str], out: Path, executor: Executor | None = None,
                  protocol: Protocol | None = None, progress: Progress | None = None,
-                 meta: dict[str, Any] | None = None, output: str = "k_sim", **kw: Any) -> MorrisResult:
+                 meta: dict[str, Any] | None = None, output: str = "k_sim", truncate_contacts: bool = False,
+                 **kw: Any) -> MorrisResult:
     """Method of Morris per trial and engine on ``output`` (``k_sim``, the paper's, or ``log_ratio``)."""
     from SALib.analyze import morris as morris_analyze
 
@@ -158,8 +227,10 @@ def morris_study(trials: list, backends: list[str], out: Path, executor: Executo
     labels = [{"study": "morris", "sample": i} for _ in trials for i in range(n)]
     outcome = _run(all_trials, backends, all_configs, labels, out, executor, protocol, progress,
                    {**(meta or {}), "study": "morris", "design": {"levels": MORRIS_LEVELS,
-                    "trajectories": MORRIS_TRAJECTORIES, "seed": MORRIS_SEED, "problem": morris_problem()}}, **kw)
-    runs = outcome.results[["trial", "backend", "sample", "k_sim", "k_field", "log_ratio", "status", "reason"]]
+                    "trajectories": MORRIS_TRAJECTORIES, "seed": MORRIS_SEED, "problem": morris_problem()}},
+                   truncate_contacts=truncate_contacts, **kw)
+    runs = outcome.results.reindex(columns=["trial", "backend", "sample", "k_sim", "k_field", "log_ratio", "status",
+                                            "reason", "cpu_s", "n_links", "dt"])
     problem, rows = morris_problem(), []
     for (tid, b), g in runs.groupby(["trial", "backend"], sort=False):
         g = g.sort_values("sample")
@@ -178,10 +249,70 @@ def morris_study(trials: list, backends: list[str], out: Path, executor: Executo
     indices = pd.DataFrame(rows)
     ranking = (indices.dropna(subset=["mu_star"]).groupby(["backend", "factor"]).mu_star.mean().reset_index())
     ranking["rank"] = ranking.groupby("backend").mu_star.rank(ascending=False).astype(int)
+    engines = morris_engine_comparison(indices)
     _save(indices, out / "morris.csv")
     _save(runs, out / "morris_runs.csv")
     _save(ranking.sort_values(["backend", "rank"]), out / "morris_ranking.csv")
-    return MorrisResult(indices, runs, ranking, outcome)
+    _save(engines, out / "morris_engines.csv")
+    return MorrisResult(indices, runs, ranking, outcome, engines)
+
+
+def morris_engine_comparison(indices: pd.DataFrame, reference: str = "pinocchio") -> pd.DataFrame:
+    """Does the factor ranking change between engines? One row per engine against the reference.
+
+    The reference is Pinocchio when present (the exact statics every dynamic
+    engine converges to), else the first engine. Over the trials analysed on
+    both: on how many the whole factor order (by mu*) and the top factor agree,
+    the mean Kendall tau between the two orders, and the largest relative
+    difference of any mu*; and whether the overall ranking (by mean mu*) is the same.
+    """
+    from scipy.stats import kendalltau
+
+    ok = indices.dropna(subset=["mu_star"])
+    backends = sorted(ok.backend.unique())
+    if not backends:
+        return pd.DataFrame()
+    ref = reference if reference in backends else backends[0]
+    mu = ok.pivot_table(index=["trial", "factor"], columns="backend", values="mu_star")
+    overall = ok.groupby(["backend", "factor"]).mu_star.mean().unstack("factor")
+    order = {b: " > ".join(overall.loc[b].sort_values(ascending=False).index) for b in backends}
+    rows = []
+    for b in backends:
+        both = mu[[ref, b]].dropna().unstack("factor")
+        trials = both.index
+        same = top = 0
+        taus = []
+        for t in trials:
+            a_, b_ = both.loc[t, ref], both.loc[t, b]
+            same += list(a_.sort_values(ascending=False).index) == list(b_.sort_values(ascending=False).index)
+            top += a_.idxmax() == b_.idxmax()
+            taus.append(kendalltau(a_.to_numpy(), b_.to_numpy()).statistic)
+        rel = (mu[b] / mu[ref] - 1).abs().dropna()
+        rows.append({"backend": b, "reference": ref, "trials_both": len(trials),
+                     "trials_analysed": int(ok[ok.backend == b].trial.nunique()),
+                     "same_order_trials": int(same), "same_top_factor_trials": int(top),
+                     "mean_kendall_tau": float(np.nanmean(taus)) if taus else np.nan,
+                     "max_rel_mu_star_diff": float(rel.max()) if len(rel) else np.nan,
+                     "median_rel_mu_star_diff": float(rel.median()) if len(rel) else np.nan,
+                     "overall_order": order[b], "same_overall_order": order[b] == order[ref]})
+    return pd.DataFrame(rows)
+
+
+def morris_engine_sentence(engines: pd.DataFrame) -> str:
+    """One sentence answering "does the factor ranking change between engines?" from ``morris_engines.csv``."""
+    if engines is None or not len(engines):
+        return "No Morris indices to compare."
+    ref = engines.reference.iloc[0]
+    others = engines[engines.backend != ref]
+    if not len(others):
+        return f"Only one engine ({ref}) was run: nothing to compare."
+    same = bool(others.same_overall_order.all())
+    head = (f"The overall factor ranking (by mean mu*) is the same on every engine: {engines.overall_order.iloc[0]}."
+            if same else "The overall factor ranking (by mean mu*) changes between engines: "
+            + "; ".join(f"{r.backend}: {r.overall_order}" for r in engines.itertuples()) + ".")
+    per = "; ".join(f"{r.backend} {r.same_order_trials}/{r.trials_both} (largest mu* difference "
+                    f"{r.max_rel_mu_star_diff:.1e})" for r in others.itertuples())
+    return f"{head} Per trial, the full order agrees with {ref}'s on: {per}."
 
 
 # ---------------------------------------------------------------- parameter sweep
@@ -202,7 +333,8 @@ class SweepResult:
 
 def sweep_study(trials: list, backends: list[str], out: Path, executor: Executor | None = None,
                 protocol: Protocol | None = None, progress: Progress | None = None,
-                meta: dict[str, Any] | None = None, levels: int = SWEEP_LEVELS, **kw: Any) -> SweepResult:
+                meta: dict[str, Any] | None = None, levels: int = SWEEP_LEVELS, truncate_contacts: bool = False,
+                **kw: Any) -> SweepResult:
     """Modulus x diameter factor over the Morris bounds; the best point per trial and whether it is on a bound."""
     (e_lo, e_hi), _ = MORRIS_FACTORS["modulus"]
     (f_lo, f_hi), _ = MORRIS_FACTORS["diameter_factor"]
@@ -213,7 +345,8 @@ def sweep_study(trials: list, backends: list[str], out: Path, executor: Executor
     all_trials = [t for t in trials for _ in configs]
     labels = [{"study": "sweep", "modulus_pa": E, "diameter_factor": f} for _ in trials for E, f in grid_cfg]
     outcome = _run(all_trials, backends, [c for _ in trials for c in configs], labels, out, executor, protocol,
-                   progress, {**(meta or {}), "study": "sweep", "levels": levels}, **kw)
+                   progress, {**(meta or {}), "study": "sweep", "levels": levels}, truncate_contacts=truncate_contacts,
+                   **kw)
     res = outcome.results
     grid = res[["trial", "backend", "modulus_pa", "diameter_factor", "k_sim", "k_field", "log_ratio", "status"]]
     ok = grid[grid.status == "ok"].copy()
