@@ -319,6 +319,9 @@ def _study_sections(run_dir: Path) -> str:
         from canebench.studies.modulus import modulus_section_html
 
         parts.append(modulus_section_html(run_dir))
+    from canebench.reports.convergence import continuum_section
+
+    parts.append(continuum_section(run_dir))
     if (run_dir / "discovery.json").exists():
         from canebench.reports.discovery import section as discovery_section
 

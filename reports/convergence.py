@@ -128,3 +128,122 @@ def beam_mesh_html(df: pd.DataFrame) -> str:
             "small-deflection solution (Castigliano's integral over the smoothed centreline). "
             f"{beam_mesh_summary(df)}.</p>"
             + worst.to_html(index=False, float_format=lambda v: f"{v:.2e}"))
+
+
+# ------------------------------------------------------------------ continuum engines
+
+CONTINUUM_COLORS = {"mujoco_rod": "tab:orange", "exudyn_beam": "tab:cyan"}
+
+
+def _bundled(df: pd.DataFrame) -> pd.DataFrame:
+    return df[~df.trial.isin(["uniform-cantilever", "tapered-cantilever"])]
+
+
+def continuum_summary(df: pd.DataFrame) -> pd.DataFrame:
+    """Per engine, variant and element count (``continuum_convergence.csv``): the
+    error against the beam over the bundled canes (median, worst |error|, how
+    many failed), the closed-form error on the two straight cantilevers, and
+    the cost: median wall time per probe and its median ratio to the MuJoCo
+    chain on the same case."""
+    rows = []
+    canes = _bundled(df)
+    for (b, v, n), g in df.groupby(["backend", "variant", "elements"], sort=False):
+        c = canes[(canes.backend == b) & (canes.variant == v) & (canes.elements == n)]
+        ok = c[c.status == "ok"]
+        row = {"backend": b, "variant": v, "elements": int(n), "trials": int(c.trial.nunique()),
+               "failed": int((c.status != "ok").sum()),
+               "median error vs beam": ok.rel_error.median() if len(ok) else np.nan,
+               "worst |error| vs beam": ok.rel_error.abs().max() if len(ok) else np.nan}
+        for tid, label in (("uniform-cantilever", "uniform cantilever vs closed form"),
+                           ("tapered-cantilever", "tapered cantilever vs closed form")):
+            h = g[g.trial == tid]
+            row[label] = float(h.rel_error_closed.iloc[0]) if len(h) else np.nan
+        row["median wall s per probe"] = c.wall_s.median() if len(c) else np.nan
+        row["median wall / mujoco chain"] = c.wall_ratio.median() if len(c) else np.nan
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _element_axis(ax, n) -> None:
+    ax.set_xscale("log")
+    ax.set_xticks([int(v) for v in n])
+    ax.xaxis.set_major_formatter(ScalarFormatter())
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
+def continuum_plot(df: pd.DataFrame, path: Path) -> Path:
+    """|k / k_ref - 1| against element count: the straight cantilevers against
+    their closed forms (with the slope -2 guide), the bundled canes against the
+    beam (median and range); cost per probe relative to the MuJoCo chain."""
+    fig, axes = plt.subplots(1, 3, figsize=(15.6, 4.4))
+    main = df[df.variant.isin(["per-vertex", ""]) & (df.elements > 0)]
+    ax = axes[0]
+    for (b, tid), g in main[main.trial.isin(["uniform-cantilever", "tapered-cantilever"])].groupby(["backend", "trial"]):
+        ls = "-" if tid.startswith("uniform") else ":"
+        ax.loglog(g.elements, g.rel_error_closed.abs(), ls, marker="o", ms=3, color=CONTINUUM_COLORS.get(b),
+                  label=f"{b} ({tid.split('-')[0]})")
+    n = np.array(sorted(main.elements.unique()), float)
+    if len(n):
+        ax.loglog(n, 0.5 / n**2, "k--", lw=0.7, label="1/(2n^2)")
+    ax.set_xlabel("elements")
+    ax.set_ylabel("|k / k_closed - 1|")
+    ax.set_title("straight cantilevers vs closed form")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    ax = axes[1]
+    canes = _bundled(main)
+    for b, g in canes.groupby("backend"):
+        e = g.assign(err=g.rel_error.abs()).groupby("elements").err
+        ax.loglog(e.median().index, e.median(), marker="o", ms=3, color=CONTINUUM_COLORS.get(b), label=f"{b} median")
+        ax.fill_between(e.min().index, e.min().clip(lower=1e-7), e.max(), color=CONTINUUM_COLORS.get(b), alpha=0.2)
+    for (b, v), g in _bundled(df[df.variant.isin(["uniform-radius", "first-edge-clamp"])]).groupby(["backend", "variant"]):
+        ax.scatter(g.elements, g.rel_error.abs(), s=8, marker="x" if v == "uniform-radius" else "+",
+                   color="k" if v == "uniform-radius" else "tab:red", label=f"{b} {v}")
+    ax.set_xlabel("elements")
+    ax.set_ylabel("|k / k_beam - 1|")
+    ax.set_title("bundled canes vs beam (median, range)")
+    ax.grid(alpha=0.3, which="both")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+    ax = axes[2]
+    for b, g in canes.groupby("backend"):
+        w = g.groupby("elements").wall_ratio.median()
+        ax.loglog(w.index, w, marker="o", ms=3, color=CONTINUUM_COLORS.get(b), label=b)
+    ax.axhline(1, color="k", lw=0.5)
+    ax.set_xlabel("elements")
+    ax.set_ylabel("wall time / MuJoCo chain (median)")
+    ax.set_title("cost per probe")
+    ax.grid(alpha=0.3, which="both")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+    for ax in axes:
+        _element_axis(ax, sorted(main.elements.unique()))
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def continuum_section(run_dir) -> str:
+    """HTML section of the continuum engines' convergence (``canebench converge``
+    writes ``continuum_convergence.csv``); empty string when absent. Rebuilds
+    the figure from the CSV."""
+    run_dir = Path(run_dir)
+    path = run_dir / "continuum_convergence.csv"
+    if not path.exists():
+        return ""
+    df = pd.read_csv(path, keep_default_na=False, na_values=[""])
+    df["variant"] = df["variant"].fillna("")
+    continuum_plot(df, run_dir / "continuum_convergence.png")
+    summ = continuum_summary(df)
+    table = summ.to_html(index=False, float_format=lambda v: f"{v:.3g}", na_rep="")
+    return ("<h2>Continuum engines against the beam: convergence with elements</h2>"
+            "<p>MuJoCo's 1D elastic flex (discrete elastic rod) and Exudyn's geometrically exact beam, compiled "
+            "from the chain's continuum (not its links), probed by the harness (fast protocol, small push, gravity "
+            "off) at each element count; errors against the beam reference on the same push, and against the closed "
+            "forms on the straight cantilevers (reference-values sec. 1). The MuJoCo rod's variants: "
+            "<code>uniform-radius</code> (one documented flex radius, the diameter at the middle of the probed span, "
+            "instead of per-vertex stiffness) and <code>first-edge-clamp</code> (the cane's first element pinned "
+            "instead of a stub edge below the base). Cost: wall time of build and probe, as a ratio to the MuJoCo "
+            "chain (default model) on the same case.</p>"
+            '<img src="continuum_convergence.png">' + table)

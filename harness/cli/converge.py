@@ -13,6 +13,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     cv.add_argument("--trials", help="trial globs on the bundled dataset (default: all)")
     cv.add_argument("--segments", default="3,4,5,6,8,10,12,15,20,25,30,40")
     cv.add_argument("--out", help="output folder (a run folder: its report then shows the study)")
+    cv.add_argument("--continuum", action="store_true",
+                    help="also the continuum engines (mujoco_rod, exudyn_beam): stiffness vs element count against "
+                         "the beam and the closed forms, cost against the MuJoCo chain (a few minutes on all canes)")
+    cv.add_argument("--continuum-elements", default="5,10,20,40,80",
+                    help="element counts for --continuum (default 5,10,20,40,80)")
     cv.set_defaults(fn=main)
 
 
@@ -32,7 +37,17 @@ def main(a: argparse.Namespace) -> int:
             from None
     if min(segs) < 1:
         raise InputError("--segments", "segments", "every segment count must be >= 1")
-    r = converge(out, a.trials, segs, progress=lambda i, n, tid: print(f"[{i:3d}/{n}] {tid}", flush=True))
+    cont = None
+    if a.continuum:
+        try:
+            cont = tuple(int(s) for s in a.continuum_elements.split(","))
+        except ValueError:
+            raise InputError("--continuum-elements", "continuum_elements",
+                             f"expected comma-separated whole numbers, got {a.continuum_elements!r}") from None
+        if min(cont) < 2:
+            raise InputError("--continuum-elements", "continuum_elements", "every element count must be >= 2")
+    r = converge(out, a.trials, segs, progress=lambda i, n, tid: print(f"[{i:3d}/{n}] {tid}", flush=True),
+                 continuum_elements=cont)
     print(r.beam_mesh_summary)
     if r.beam_mesh is not None and len(r.beam_mesh):
         worst = r.beam_mesh.sort_values("rel_error", ascending=False).head(5)
@@ -52,6 +67,18 @@ def main(a: argparse.Namespace) -> int:
         g = df[(df.trial == "uniform-cantilever") & (df.formula == f) & (df.discretization == "uniform")]
         last = g[g.segments == g.segments.max()].iloc[0]
         print(f"uniform cantilever, {f}, {int(last.segments)} segments: k_chain/k_beam = {last.ratio:.4f}")
+    if r.continuum_summary is not None and len(r.continuum_summary):
+        print("\ncontinuum engines: stiffness vs the beam (bundled canes), closed forms (cantilevers), cost vs the "
+              "MuJoCo chain (small push, gravity off):")
+        print(r.continuum_summary.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     page = convergence_page(out)
+    from canebench.reports.convergence import continuum_section
+
+    sec = continuum_section(out)
+    if sec:
+        cpage = out / "continuum.html"
+        cpage.write_text("<!doctype html><html><head><meta charset='utf-8'><title>canebench continuum engines"
+                         f"</title></head><body>{sec}</body></html>")
+        print(f"continuum engines: {cpage}")
     print(f"done in {time.perf_counter() - t0:.1f} s -> {page}")
     return 0

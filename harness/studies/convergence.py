@@ -182,6 +182,92 @@ def chain_convergence(cases: list[tuple[str, CaneDescription, str]], segments=SE
     return pd.DataFrame(rows)
 
 
+#: element counts of the continuum engines' convergence (``canebench converge --continuum-elements``)
+CONTINUUM_ELEMENTS = (5, 10, 20, 40, 80)
+#: protocol samples per continuum probe in the convergence study (2 mm: small deflection, the same push for all)
+CONTINUUM_STEPS = 4
+#: cantilevers of :func:`straight_cantilever` and their closed-form tip stiffness (reference-values sec. 1)
+CANTILEVERS = ("uniform-cantilever", "tapered-cantilever")
+
+
+def cantilever_stiffness(tapered: bool, E: float = 4.57e9, L: float = 1.2, d0: float = 0.012,
+                         d1: float = 0.006) -> float:
+    """Closed-form small-deflection tip stiffness (N/m) of :func:`straight_cantilever`:
+    3 E I0 / L^3, times r = d1 / d0 when tapered (reference-values sec. 1)."""
+    k = 3 * E * np.pi * d0**4 / 64 / L**3
+    return k * (d1 / d0) if tapered else k
+
+
+def continuum_variants(elements=CONTINUUM_ELEMENTS) -> list[tuple[str, str, int, Callable[[], object]]]:
+    """(backend, variant, elements, factory) of every continuum configuration the study probes.
+
+    Every engine at every element count; the MuJoCo rod's two alternatives
+    (one documented radius instead of the per-vertex taper, MuJoCo's plain
+    first-edge clamp instead of the stub) at its default element count; the
+    MuJoCo chain (default model) once, as the cost reference.
+    """
+    from canebench.backends import exudyn_beam_backend as xb
+    from canebench.backends import mujoco_rod_backend as mr
+    from canebench.backends.mujoco_backend import MujocoBackend
+
+    out: list[tuple[str, str, int, Callable[[], object]]] = []
+    for n in elements:
+        out.append(("mujoco_rod", "per-vertex", n, lambda n=n: mr.MujocoRodBackend(n)))
+    out.append(("mujoco_rod", "uniform-radius", mr.ELEMENTS, lambda: mr.MujocoRodBackend(mr.ELEMENTS, taper="uniform")))
+    out.append(("mujoco_rod", "first-edge-clamp", mr.ELEMENTS,
+                lambda: mr.MujocoRodBackend(mr.ELEMENTS, clamp="first-edge")))
+    for n in elements:
+        out.append(("exudyn_beam", "", n, lambda n=n: xb.ExudynBeamBackend(n)))
+    out.append(("mujoco", "chain", 0, MujocoBackend))
+    return out
+
+
+def continuum_convergence(cases: list[tuple[str, CaneDescription, str]], elements=CONTINUUM_ELEMENTS,
+                          n_steps: int = CONTINUUM_STEPS, base: ModelConfig | None = None,
+                          progress=None) -> pd.DataFrame:
+    """Stiffness of the continuum engines against element count, relative to the beam.
+
+    Each case is probed by the harness (fast protocol, ``n_steps`` samples,
+    gravity off) on every configuration of :func:`continuum_variants` and on
+    the beam (the same protocol and samples, so the push's small geometric
+    nonlinearity is common to both). Columns: ``trial``, ``backend``,
+    ``variant``, ``elements`` (0: not a continuum), ``k`` and ``k_beam`` (N/m),
+    ``rel_error`` = k / k_beam - 1, ``k_closed`` and ``rel_error_closed``
+    (closed form; straight cantilevers only), ``wall_s`` (build and probe),
+    ``wall_ratio`` (to the MuJoCo chain on the same case), ``status``, ``reason``.
+    """
+    from canebench.backends.beam_backend import BeamBackend
+    from canebench.probe.driver import run_probe
+    from canebench.probe.protocol import PROTOCOLS
+
+    proto = PROTOCOLS["fast"]
+    base = (base or ModelConfig()).replace(gravity=0.0)
+    variants = continuum_variants(elements)
+    rows = []
+    for i, (tid, cane, pid) in enumerate(cases):
+        chain = build_chain(cane, pid, base)
+        tb = run_probe(BeamBackend(), chain, proto, n_steps)
+        fb = tb.fit()
+        k_beam = fb.slope if (fb is not None and tb.status == "ok") else np.nan  # N/m (SI trace)
+        k_closed = cantilever_stiffness(tid.startswith("tapered")) if tid in CANTILEVERS else np.nan
+        case_rows = []
+        for backend, variant, n, make in variants:
+            tr = run_probe(make(), chain, proto, n_steps)
+            f = tr.fit()
+            k = f.slope if (f is not None and tr.status == "ok") else np.nan
+            case_rows.append({"trial": tid, "backend": backend, "variant": variant, "elements": n, "k": k,
+                              "k_beam": k_beam, "rel_error": k / k_beam - 1, "k_closed": k_closed,
+                              "rel_error_closed": k / k_closed - 1, "wall_s": tr.wall_s, "status": tr.status,
+                              "reason": tr.reason})
+        t_chain = next(r["wall_s"] for r in case_rows if r["backend"] == "mujoco")
+        for r in case_rows:
+            r["wall_ratio"] = r["wall_s"] / t_chain
+        rows += case_rows
+        if progress:
+            progress(i + 1, len(cases), tid)
+    return pd.DataFrame(rows)
+
+
 @dataclass
 class ConvergenceResult:
     """The convergence study's tables (``canebench converge``)."""
@@ -194,15 +280,26 @@ class ConvergenceResult:
     beam_mesh: pd.DataFrame | None = None  # per push point: beam vs its own mesh twice as fine (beam_mesh.csv)
     beam_mesh_summary: str = ""  # one line: how many push points pass, the worst
     exceedances_twist: pd.DataFrame | None = None  # the same with the twist joint (expected: none)
+    continuum: pd.DataFrame | None = None  # continuum engines vs element count (continuum_convergence.csv)
+    continuum_summary: pd.DataFrame | None = None  # error vs beam and cost per engine (continuum_summary.csv)
 
     def to_df(self) -> pd.DataFrame:
         return self.chains
 
 
 def converge(out: Path, trials: str | None = None, segments: tuple[int, ...] = SEGMENTS,
-             progress: Callable[[int, int, str], None] | None = None) -> ConvergenceResult:
-    """Run the convergence study on the two straight cantilevers and the bundled canes; write CSVs and figures."""
-    from canebench.reports.convergence import beam_mesh_summary, chain_plot, exceedances, rod_plot, summary
+             progress: Callable[[int, int, str], None] | None = None,
+             continuum_elements: tuple[int, ...] | None = None) -> ConvergenceResult:
+    """Run the convergence study on the two straight cantilevers and the bundled canes; write CSVs and figures.
+
+    ``continuum_elements`` (None or empty, the default: skipped; ``canebench
+    converge --continuum`` gives :data:`CONTINUUM_ELEMENTS`): element counts of
+    the continuum engines' part (:func:`continuum_convergence`), written to
+    ``continuum_convergence.csv``, ``continuum_summary.csv`` and
+    ``continuum_convergence.png``.
+    """
+    from canebench.reports.convergence import (beam_mesh_summary, chain_plot, continuum_plot, continuum_summary,
+                                               exceedances, rod_plot, summary)
 
     from ..data.dataset import bundled_dataset, load_dataset
 
@@ -222,5 +319,12 @@ def converge(out: Path, trials: str | None = None, segments: tuple[int, ...] = S
     rod_plot(rod, out / "rod_convergence.png")
     summ = summary(df)
     summ.to_csv(out / "convergence_summary.csv", index=False)
+    cont = cont_summ = None
+    if continuum_elements:
+        cont = continuum_convergence(cases, tuple(continuum_elements), progress=progress)
+        cont.to_csv(out / "continuum_convergence.csv", index=False)
+        cont_summ = continuum_summary(cont)
+        cont_summ.to_csv(out / "continuum_summary.csv", index=False)
+        continuum_plot(cont, out / "continuum_convergence.png")
     return ConvergenceResult(rod, df, summ, exceedances(df), order, mesh, beam_mesh_summary(mesh),
-                             exceedances(df, "dual_length+twist"))
+                             exceedances(df, "dual_length+twist"), cont, cont_summ)
