@@ -93,7 +93,105 @@ FAST_SPECTRAL_RADIUS = 0.8
 FAST_NEWTON_RELATIVE_TOLERANCE = 1e-3
 
 
-class ExudynSimulation(Simulation):
+class ExudynProbeLoop(Simulation):
+    """The probe loop every Exudyn simulation shares: a pre-step user function
+    applies the harness's force (or the native PID's integral) before each
+    implicit step; P and D of the native PID are a CartesianSpringDamper whose
+    offset is the setpoint. Subclasses build the system and say where the
+    probe is (:meth:`_output`); they may hook :meth:`_before_solve`.
+
+    Attributes a subclass sets: ``mbs``, ``solver``, ``sims``, ``dt``,
+    ``gains``, ``x0``, ``setpoint``, ``integral``, ``csd``, ``load``,
+    ``_apply``, ``_controller``, ``_tail_from``, ``_vmax``, ``_step_count``.
+    """
+
+    #: set when a new harness sample or setpoint starts (a subclass may reuse work until then)
+    _jacobian_stale = True
+
+    def _output(self, kind: Any) -> Any:
+        """The probe point's output of ``kind`` (exu.OutputVariableType)."""
+        raise NotImplementedError
+
+    # state along the probe (x of the probe frame)
+    def read(self) -> tuple[float, float]:
+        p = self._output(exu.OutputVariableType.Position)
+        v = self._output(exu.OutputVariableType.Velocity)
+        return float(p[0] - self.x0), float(v[0])
+
+    # An explicit force (N) along the probe, constant over the coming step (``self._apply`` is one of these).
+    def _apply_on_offset(self, force: float) -> None:
+        """Shift the connector's offset so that it adds ``force`` to its PD: Kp (sp + F / Kp - x) = Kp (sp - x) + F."""
+        self.mbs.SetObjectParameter(self.csd, "offset", [self.setpoint + force / self.gains[0], 0.0, 0.0])
+
+    def _apply_as_load(self, force: float) -> None:
+        """Set the probe load to ``force``."""
+        self.mbs.SetLoadParameter(self.load, "loadVector", [force, 0.0, 0.0])
+
+    def _pre_step(self, mbs: Any, t: float) -> bool:
+        if self._controller is None:  # native: P and D are the connector; the integral is explicit
+            # only the position is needed here (the harness reads the speed itself between calls)
+            x = self._output(exu.OutputVariableType.Position)[0] - self.x0
+            self.integral += (self.setpoint - x) * self.dt
+            self._apply(self.gains[1] * self.integral)
+            return True
+        x, v = self.read()  # harness PID (or a fixed force from step()), explicit
+        self._apply(self._controller(x, v))
+        self._step_count += 1
+        if self._step_count > self._tail_from and abs(v) > self._vmax:
+            self._vmax = abs(v)
+        return True
+
+    def _before_solve(self) -> None:
+        """Called before every ``SolveSteps`` (default: nothing)."""
+
+    def _solve(self, n_steps: int) -> None:
+        """Advance ``n_steps`` steps of ``dt`` with the persistent solver."""
+        it = self.solver.it  # a copy: write it back
+        it.endTime = it.currentTime + n_steps * self.dt
+        self.solver.it = it
+        self._before_solve()
+        if not self.solver.SolveSteps(self.mbs, self.sims):
+            raise exu.SolverError("Exudyn SolveSteps failed: " + self.solver.GetErrorString())
+
+    def run_controlled(self, controller: Callable[[float, float], float], n_steps: int, tail: int) -> float:
+        self._controller = controller
+        self._step_count, self._tail_from, self._vmax = 0, n_steps - tail, 0.0
+        self._jacobian_stale = True  # one call per harness sample
+        try:
+            self._solve(n_steps)
+        finally:
+            self._controller = None
+        return self._vmax
+
+    def step(self, force: float) -> None:
+        self._controller = lambda x, v: force
+        try:
+            self._solve(1)
+        finally:
+            self._controller = None
+
+    def set_setpoint(self, setpoint: float) -> None:
+        self.setpoint = setpoint
+        self.mbs.SetObjectParameter(self.csd, "offset", [setpoint, 0.0, 0.0])  # the pre-step adds the integral
+        self._jacobian_stale = True
+
+    def advance(self, n_steps: int) -> None:
+        self._solve(n_steps)
+
+    def force(self) -> float:
+        x, v = self.read()
+        kp, ki, kd = self.gains
+        return kp * (self.setpoint - x) - kd * v + ki * self.integral
+
+    def health(self) -> str | None:
+        q = self.mbs.systemData.GetODE2Coordinates()
+        return None if np.all(np.isfinite(q)) else "Exudyn state is not finite"
+
+    def close(self) -> None:
+        self.solver.FinalizeSolver(self.mbs, self.sims)
+
+
+class ExudynSimulation(ExudynProbeLoop):
     """One chain in Exudyn, advanced by a persistent implicit solver.
 
     Parameters
@@ -193,34 +291,8 @@ class ExudynSimulation(Simulation):
         timer.useTimer = False
         self.solver.timer = timer
 
-    # state along the probe (x of the probe frame)
-    def read(self) -> tuple[float, float]:
-        p = self.mbs.GetMarkerOutput(self.marker, exu.OutputVariableType.Position)
-        v = self.mbs.GetMarkerOutput(self.marker, exu.OutputVariableType.Velocity)
-        return float(p[0] - self.x0), float(v[0])
-
-    # An explicit force (N) along the probe, constant over the coming step (``self._apply`` is one of these).
-    def _apply_on_offset(self, force: float) -> None:
-        """Shift the connector's offset so that it adds ``force`` to its PD: Kp (sp + F / Kp - x) = Kp (sp - x) + F."""
-        self.mbs.SetObjectParameter(self.csd, "offset", [self.setpoint + force / self.gains[0], 0.0, 0.0])
-
-    def _apply_as_load(self, force: float) -> None:
-        """Set the probe load to ``force``."""
-        self.mbs.SetLoadParameter(self.load, "loadVector", [force, 0.0, 0.0])
-
-    def _pre_step(self, mbs: Any, t: float) -> bool:
-        if self._controller is None:  # native: P and D are the connector; the integral is explicit
-            # only the position is needed here (the harness reads the speed itself between calls)
-            x = mbs.GetMarkerOutput(self.marker, exu.OutputVariableType.Position)[0] - self.x0
-            self.integral += (self.setpoint - x) * self.dt
-            self._apply(self.gains[1] * self.integral)
-            return True
-        x, v = self.read()  # harness PID (or a fixed force from step()), explicit
-        self._apply(self._controller(x, v))
-        self._step_count += 1
-        if self._step_count > self._tail_from and abs(v) > self._vmax:
-            self._vmax = abs(v)
-        return True
+    def _output(self, kind: Any) -> Any:
+        return self.mbs.GetMarkerOutput(self.marker, kind)
 
     def _newton_jacobian(self, solver: Any, mbs: Any, settings: Any) -> bool:
         """Solver user function answering the Newton method's Jacobian requests.
@@ -246,52 +318,9 @@ class ExudynSimulation(Simulation):
         self._reuse_request = False
         return True
 
-    def _solve(self, n_steps: int) -> None:
-        """Advance ``n_steps`` steps of ``dt`` with the persistent solver."""
-        it = self.solver.it  # a copy: write it back
-        it.endTime = it.currentTime + n_steps * self.dt
-        self.solver.it = it
+    def _before_solve(self) -> None:
         self._reuse_request = not self._jacobian_stale
         self._jacobian_stale = False
-        if not self.solver.SolveSteps(self.mbs, self.sims):
-            raise exu.SolverError("Exudyn SolveSteps failed: " + self.solver.GetErrorString())
-
-    def run_controlled(self, controller: Callable[[float, float], float], n_steps: int, tail: int) -> float:
-        self._controller = controller
-        self._step_count, self._tail_from, self._vmax = 0, n_steps - tail, 0.0
-        self._jacobian_stale = True  # one call per harness sample
-        try:
-            self._solve(n_steps)
-        finally:
-            self._controller = None
-        return self._vmax
-
-    def step(self, force: float) -> None:
-        self._controller = lambda x, v: force
-        try:
-            self._solve(1)
-        finally:
-            self._controller = None
-
-    def set_setpoint(self, setpoint: float) -> None:
-        self.setpoint = setpoint
-        self.mbs.SetObjectParameter(self.csd, "offset", [setpoint, 0.0, 0.0])  # the pre-step adds the integral
-        self._jacobian_stale = True
-
-    def advance(self, n_steps: int) -> None:
-        self._solve(n_steps)
-
-    def force(self) -> float:
-        x, v = self.read()
-        kp, ki, kd = self.gains
-        return kp * (self.setpoint - x) - kd * v + ki * self.integral
-
-    def health(self) -> str | None:
-        q = self.mbs.systemData.GetODE2Coordinates()
-        return None if np.all(np.isfinite(q)) else "Exudyn state is not finite"
-
-    def close(self) -> None:
-        self.solver.FinalizeSolver(self.mbs, self.sims)
 
 
 class ExudynBackend(DynamicBackend):

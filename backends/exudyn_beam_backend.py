@@ -79,7 +79,8 @@ from canebench.model.geometry import frame_with_x
 from canebench.probe.protocol import Protocol
 
 from . import continuum as cont
-from .base import DynamicBackend, Simulation
+from .base import DynamicBackend
+from .exudyn_backend import ExudynProbeLoop
 
 #: default element count over the whole cane (chosen from ``canebench converge``; README "Continuum engines")
 ELEMENTS = 20
@@ -127,7 +128,7 @@ def section(g, s_mid: float) -> exu.BeamSection:
     return sec
 
 
-class ExudynBeamSimulation(Simulation):
+class ExudynBeamSimulation(ExudynProbeLoop):
     """The cane's continuum as geometrically exact beam elements, advanced by a persistent implicit solver."""
 
     def __init__(self, chain: Chain, proto: Protocol, native: bool, n_elements: int = ELEMENTS,
@@ -224,72 +225,8 @@ class ExudynBeamSimulation(Simulation):
         timer.useTimer = False
         self.solver.timer = timer
 
-    def read(self) -> tuple[float, float]:
-        p = self.mbs.GetNodeOutput(self.node, exu.OutputVariableType.Position)
-        v = self.mbs.GetNodeOutput(self.node, exu.OutputVariableType.Velocity)
-        return float(p[0] - self.x0), float(v[0])
-
-    def _apply_on_offset(self, force: float) -> None:
-        """Kp (sp + F / Kp - x) = Kp (sp - x) + F: an explicit force carried by the connector's offset."""
-        self.mbs.SetObjectParameter(self.csd, "offset", [self.setpoint + force / self.gains[0], 0.0, 0.0])
-
-    def _apply_as_load(self, force: float) -> None:
-        self.mbs.SetLoadParameter(self.load, "loadVector", [force, 0.0, 0.0])
-
-    def _pre_step(self, mbs: Any, t: float) -> bool:
-        if self._controller is None:  # native: P and D are the connector; the integral is explicit
-            x = mbs.GetNodeOutput(self.node, exu.OutputVariableType.Position)[0] - self.x0
-            self.integral += (self.setpoint - x) * self.dt
-            self._apply(self.gains[1] * self.integral)
-            return True
-        x, v = self.read()
-        self._apply(self._controller(x, v))
-        self._step_count += 1
-        if self._step_count > self._tail_from and abs(v) > self._vmax:
-            self._vmax = abs(v)
-        return True
-
-    def _solve(self, n_steps: int) -> None:
-        it = self.solver.it
-        it.endTime = it.currentTime + n_steps * self.dt
-        self.solver.it = it
-        if not self.solver.SolveSteps(self.mbs, self.sims):
-            raise exu.SolverError("Exudyn SolveSteps failed: " + self.solver.GetErrorString())
-
-    def run_controlled(self, controller: Callable[[float, float], float], n_steps: int, tail: int) -> float:
-        self._controller = controller
-        self._step_count, self._tail_from, self._vmax = 0, n_steps - tail, 0.0
-        try:
-            self._solve(n_steps)
-        finally:
-            self._controller = None
-        return self._vmax
-
-    def step(self, force: float) -> None:
-        self._controller = lambda x, v: force
-        try:
-            self._solve(1)
-        finally:
-            self._controller = None
-
-    def set_setpoint(self, setpoint: float) -> None:
-        self.setpoint = setpoint
-        self.mbs.SetObjectParameter(self.csd, "offset", [setpoint, 0.0, 0.0])
-
-    def advance(self, n_steps: int) -> None:
-        self._solve(n_steps)
-
-    def force(self) -> float:
-        x, v = self.read()
-        kp, ki, kd = self.gains
-        return kp * (self.setpoint - x) - kd * v + ki * self.integral
-
-    def health(self) -> str | None:
-        q = self.mbs.systemData.GetODE2Coordinates()
-        return None if np.all(np.isfinite(q)) else "Exudyn state is not finite"
-
-    def close(self) -> None:
-        self.solver.FinalizeSolver(self.mbs, self.sims)
+    def _output(self, kind: Any) -> Any:
+        return self.mbs.GetNodeOutput(self.node, kind)
 
 
 class ExudynBeamBackend(DynamicBackend):
