@@ -171,6 +171,16 @@ def _element_axis(ax, n) -> None:
     ax.xaxis.set_minor_formatter(NullFormatter())
 
 
+def _label_panel(ax, ylabel: str, title: str) -> None:  # noqa: ANN001
+    """Axis labels against element count, log grid, legend when anything is labelled."""
+    ax.set_xlabel("elements")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3, which="both")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+
+
 def continuum_plot(df: pd.DataFrame, path: Path) -> Path:
     """|k / k_ref - 1| against element count: the straight cantilevers against
     their closed forms (with the slope -2 guide), the bundled canes against the
@@ -185,11 +195,7 @@ def continuum_plot(df: pd.DataFrame, path: Path) -> Path:
     n = np.array(sorted(main.elements.unique()), float)
     if len(n):
         ax.loglog(n, 0.5 / n**2, "k--", lw=0.7, label="1/(2n^2)")
-    ax.set_xlabel("elements")
-    ax.set_ylabel("|k / k_closed - 1|")
-    ax.set_title("straight cantilevers vs closed form")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
+    _label_panel(ax, "|k / k_closed - 1|", "straight cantilevers vs closed form")
     ax = axes[1]
     canes = _bundled(main)
     for b, g in canes.groupby("backend"):
@@ -199,23 +205,13 @@ def continuum_plot(df: pd.DataFrame, path: Path) -> Path:
     for (b, v), g in _bundled(df[df.variant.isin(["uniform-radius", "first-edge-clamp"])]).groupby(["backend", "variant"]):
         ax.scatter(g.elements, g.rel_error.abs(), s=8, marker="x" if v == "uniform-radius" else "+",
                    color="k" if v == "uniform-radius" else "tab:red", label=f"{b} {v}")
-    ax.set_xlabel("elements")
-    ax.set_ylabel("|k / k_beam - 1|")
-    ax.set_title("bundled canes vs beam (median, range)")
-    ax.grid(alpha=0.3, which="both")
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=7)
+    _label_panel(ax, "|k / k_beam - 1|", "bundled canes vs beam (median, range)")
     ax = axes[2]
     for b, g in canes.groupby("backend"):
         w = g.groupby("elements").wall_ratio.median()
         ax.loglog(w.index, w, marker="o", ms=3, color=CONTINUUM_COLORS.get(b), label=b)
     ax.axhline(1, color="k", lw=0.5)
-    ax.set_xlabel("elements")
-    ax.set_ylabel("wall time / MuJoCo chain (median)")
-    ax.set_title("cost per probe")
-    ax.grid(alpha=0.3, which="both")
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=7)
+    _label_panel(ax, "wall time / MuJoCo chain (median)", "cost per probe")
     for ax in axes:
         _element_axis(ax, sorted(main.elements.unique()))
     fig.tight_layout()

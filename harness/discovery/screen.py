@@ -128,7 +128,7 @@ def trial_geometry(trial, config: ModelConfig) -> TrialGeometry:
     fit = chain.meta["diameter_fit"]
     d0 = fit["d_centroid"] + fit["factor"] * fit["slope"] * (s - fit["s_centroid"])
     pp = trial.cane.push_point(trial.push_id)
-    t_push = trial.cane and _tangent_at(rod, s_p)
+    t_push = _tangent_at(rod, s_p)
     return TrialGeometry(trial.id, trial.cane.id, s, w, d0, Mb, Mt, M_root, rod.modulus, rod.poisson_ratio,
                          rod.min_diameter, np.array(pp.direction, float), t_push, cfg.probe_angle_deg, s_p,
                          float(p[2] - P[0][2]))

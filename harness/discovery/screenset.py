@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.config import ModelConfig
 from ..model.effects import AppliedEffects, EffectSpec
 from .screen import TrialGeometry
 
@@ -105,7 +104,3 @@ def predict_log_k(ss: ScreenSet, log_k_base: np.ndarray, specs: tuple[EffectSpec
     inv = np.exp(-log_k_base) * (cc / ss.c0) + series
     with np.errstate(divide="ignore", invalid="ignore"):
         return -np.log(inv)
-
-
-def baseline_config(config: ModelConfig) -> ModelConfig:
-    return config.replace(effects=tuple(e for e in config.effects if e.name == "obstruction"))

@@ -34,7 +34,7 @@ from ..model.config import ModelConfig
 from ..model.effects import EFFECTS, EffectSpec
 from ..model.presets import PRESETS
 from ..probe.protocol import PROTOCOLS
-from .fit import Candidate, bootstrap_ci, cross_validate, fit_candidate, sign_flip_p
+from .fit import Candidate, bootstrap_ci, cross_validate, sign_flip_p
 from .onsets import detect_onset
 from .screen import trial_geometry
 from .screenset import ScreenSet, predict_log_k
@@ -223,6 +223,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             break
         level = alpha / len(remaining)
         trials_here = []
+        rows = {}
         for c in remaining:
             cand = Candidate.of(current + (c,))
             cv = cross_validate(cand, ss, lkf, lkb)
@@ -231,12 +232,12 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             diff = _l1_by_cane(cv_cur.residual, ss.canes) - _l1_by_cane(cv.residual, ss.canes)
             p = sign_flip_p(diff, seed=seed)
             trials_here.append((c, cv, float(diff.mean()), p))
-            steps.append({"step": len(current) + 1, "model": "+".join(current + (c,)), "candidate": c,
-                          "cv_gain_per_cane": float(diff.mean()), "cv_nll_gain": float(
-                              np.mean([cv_cur.loss[k] - cv.loss[k] for k in cv.loss])), "p": p, "level": level,
-                          "aic": cv.fit.aic, "bic": cv.fit.bic,
-                          "cv_median_abs": float(np.median(np.abs(cv.residual))),
-                          "params": {s.name: dict(s.params) for s in cv.fit.specs}})
+            rows[c] = {"step": len(current) + 1, "model": "+".join(current + (c,)), "candidate": c,
+                       "cv_gain_per_cane": float(diff.mean()),
+                       "cv_nll_gain": float(np.mean([cv_cur.loss[k] - cv.loss[k] for k in cv.loss])),
+                       "p": p, "level": level, "aic": cv.fit.aic, "bic": cv.fit.bic,
+                       "cv_median_abs": float(np.median(np.abs(cv.residual))),
+                       "params": {s.name: dict(s.params) for s in cv.fit.specs}, "chosen": False}
         # the best of the significant candidates by held-out gain; BIC must agree, and the
         # out-of-sample median |log ratio| must fall by MIN_REDUCTION (a consistent but
         # negligible gain is not a physical effect worth naming)
@@ -245,10 +246,11 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
               and np.median(np.abs(t[1].residual)) < (1 - MIN_REDUCTION) * med_cur]
         best = max(ok or trials_here, key=lambda t: t[2])
         c, cv, gain, p = best
+        rows[c]["chosen"] = bool(ok)
+        steps.extend(rows.values())
         if ok:
             current = current + (c,)
             cv_cur = cv
-            steps[-len(remaining) + [t[0] for t in trials_here].index(c)]["chosen"] = True
             continue
         red = 1 - float(np.median(np.abs(cv.residual))) / med_cur if med_cur > 0 else 0.0
         stop = (f"no candidate's out-of-sample gain is significant (best: {c}, gain {gain:.3g} in mean |ln| per cane, "

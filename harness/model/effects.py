@@ -54,8 +54,12 @@ class Parameter:
     null : float
         The value at which the effect does nothing (``inf`` for a spring in series).
     log : bool
-        Searched on a log scale (positive quantities spanning decades).
+        Searched on a log scale (positive quantities spanning decades); only
+        positive values are valid.
     doc : str
+    minimum : float
+        Smallest physically valid value (beyond the search bounds: a model
+        file may set any valid value).
     """
 
     unit: str
@@ -64,6 +68,7 @@ class Parameter:
     null: float
     log: bool = False
     doc: str = ""
+    minimum: float = -math.inf
 
 
 class Effect:
@@ -173,7 +178,7 @@ class BaseFlare(Effect):
     summary = ("the cane thickens toward the base beyond the linear caliper fit: "
                "d(s) = d_fit(s) + excess_mm exp(-s / length_mm)")
     where = "geometry"
-    parameters = {"excess_mm": Parameter("mm", 0.0, 25.0, 0.0, False, "extra diameter at the ground"),
+    parameters = {"excess_mm": Parameter("mm", 0.0, 25.0, 0.0, False, "extra diameter at the ground", minimum=0.0),
                   "length_mm": Parameter("mm", 20.0, 600.0, 150.0, True, "e-folding length of the excess")}
 
     def diameter(self, s: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -325,7 +330,7 @@ class EffectSpec:
                                      f"unknown parameter; {self.name} has {', '.join(cls.parameters)}")
                 par = cls.parameters[k]
                 ok = math.isfinite(v) or v == par.null
-                if not ok or (par.log and v <= 0) or (k in ("excess_mm",) and v < 0):
+                if not ok or (par.log and v <= 0) or v < par.minimum:
                     raise InputError(source, f"{self.name}{where}.{k}", f"invalid value {v!r} ({par.unit})")
 
     def to_dict(self) -> dict[str, Any]:
