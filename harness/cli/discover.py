@@ -22,6 +22,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selftest", action="store_true", help="run the seeded hidden-effect suite instead")
     p.add_argument("--seed", type=int, default=7, help="self-test seed")
     p.add_argument("--workers", type=int, default=2, help="self-test processes")
+    p.add_argument("--selftest-cases", help="self-test: comma-separated globs on case ids (default: all 40)")
     g = p.add_argument_group("execution")
     g.add_argument("--executor", default="local", help="local (default), serial or dask")
     g.add_argument("--jobs", type=int, default=__import__("os").cpu_count() or 1)
@@ -34,7 +35,7 @@ def main(a: argparse.Namespace) -> int:
         from ..discovery.selftest import run_selftest, summarize
 
         out = Path(a.out if a.out != "canebench-runs/discover" else "canebench-runs/discover-selftest")
-        df = run_selftest(out, a.seed, a.workers)
+        df = run_selftest(out, a.seed, a.workers, only=a.selftest_cases)
         cols = ["id", "named", "unexplained", "size", "gap_before", "gap_after_cv"] + \
                [c for c in df.columns if c.startswith("err_")]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
