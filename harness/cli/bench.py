@@ -22,7 +22,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     be.add_argument("--morris", action="store_true",
                     help="Method of Morris per engine on a subset of trials, extrapolated to a 1,040-run study, "
                          "ratios to Pinocchio, and the same study's estimate on the paper's 40 kHz protocol")
-    be.add_argument("--field", help="--morris: dataset (default: the bundled synthetic set)")
+    be.add_argument("--discover", action="store_true",
+                    help="the whole discovery workflow with engine confirmation (--backends, default "
+                         "beam,pinocchio,mujoco), by stage, as a ratio to a plain beam run of the same trials")
+    be.add_argument("--field", help="--morris, --discover: dataset (default: the bundled synthetic set)")
     be.add_argument("--n-trials", type=int, default=2,
                     help="--morris: usable trials in the subset, spread over the dataset (default 2; --trials "
                          "overrides)")
@@ -45,6 +48,9 @@ def main(a: argparse.Namespace) -> int:
         bench.bench_morris(backends=a.backends.split(",") if a.backends else None, data=a.field, trials=a.trials,
                            n_trials=a.n_trials, paper_runs=a.paper_runs, paper_steps=a.paper_steps,
                            workers=a.workers)
+        return 0
+    if a.discover:
+        bench.bench_discover(data=a.field, backends=a.backends.split(",") if a.backends else None, workers=a.workers)
         return 0
     a.backends = a.backends or "mujoco"
     if a.beam:

@@ -95,12 +95,16 @@ class ScreenSet:
         return cc, float(x[1] - x[0])
 
 
+M_PER_N_TO_MM_PER_N = 1e3
+
+
 def predict_log_k(ss: ScreenSet, log_k_base: np.ndarray, specs: tuple[EffectSpec, ...]) -> np.ndarray:
-    """ln k_pred per trial: the baseline's stiffness scaled by the screened change."""
+    """ln k_pred per trial (k in N/mm): the baseline's stiffness scaled by the screened change."""
     if not specs:
         return log_k_base
     fx = AppliedEffects([s.instance() for s in specs])
     cc, series = ss.compliance(fx)
-    inv = np.exp(-log_k_base) * (cc / ss.c0) + series
+    # stiffness is in N/mm throughout the harness; the series compliance comes in m/N
+    inv = np.exp(-log_k_base) * (cc / ss.c0) + series * M_PER_N_TO_MM_PER_N
     with np.errstate(divide="ignore", invalid="ignore"):
         return -np.log(inv)
