@@ -16,8 +16,8 @@ Configuration, by protocol:
   whole loop is implicit and stable far above the explicit limit. 5 ms is
   chosen, like Exudyn's 10 ms, by measurement: on the 54 bundled trials k_sim
   moves by at most a few 1e-4 from the 1 ms result (inside the 1e-3 baseline
-  gate), at about a fifth of the cost; the harness samples force every 0.5 s of
-  the ramp, so 5 ms still gives 100 steps per sample.
+  gate), at about a fifth of the cost; the harness samples force once per 1 s
+  protocol step, so 5 ms still gives 200 steps per sample.
 
 The probe acts through a site transmission referenced to a world site placed
 at the probe point's rest position with its x axis along the probe

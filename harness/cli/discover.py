@@ -40,7 +40,8 @@ def main(a: argparse.Namespace) -> int:
                [c for c in df.columns if c.startswith("err_")]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
         print(json.dumps(summarize(df), indent=2, default=float))
-        print(f"written: {out / 'selftest.csv'}, {out / 'selftest.json'}")
+        stem = "selftest_subset" if a.selftest_cases else "selftest"
+        print(f"written: {out / (stem + '.csv')}, {out / (stem + '.json')}")
         return 0
     from ..discovery.workflow import discover
     from ..execute.progress import Progress

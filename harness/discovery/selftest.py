@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import shutil
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -74,15 +76,22 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     folder = Path(root) / case["id"]
     done = folder / "selftest_row.json"
     code = code_fingerprint()
+    spec = json.loads(json.dumps(case))
     if done.exists():
         try:
             prev = json.loads(done.read_text())
-            if prev.get("case") == json.loads(json.dumps(case)) and prev.get("code") == code:
+            if prev.get("case") == spec and prev.get("code") == code:
                 return prev["row"]
         except (ValueError, KeyError):
             pass  # a torn or foreign file: recompute
-    if not (folder / "truth" / "truth.json").exists():
+    # the dataset is reused only if it was generated for this very case by this code
+    stamp = folder / "truth" / "generated_for.json"
+    made = {"case": spec, "code": code}
+    if not stamp.exists() or _read_json(stamp) != made:
+        if folder.exists():
+            shutil.rmtree(folder)
         generate_hidden(folder, case["seed"], case["effects"])
+        _write_json_atomic(stamp, made)
     t0 = time.perf_counter()
     res = discover(load_dataset(folder), confirm=False, executor=make_executor("serial", 1, None), n_boot=40,
                    seed=case["seed"])
@@ -111,10 +120,22 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
         row["obstruction_recall"] = len(found & true) / len(true) if true else math.nan
         errs = [abs(named["obstruction"]["local"][k]["onset_mm"] - truth["obstructed"][k]) for k in found & true]
         row["onset_err_mm"] = float(np.median(errs)) if errs else math.nan
-    tmp = done.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"case": case, "code": code, "row": row}, default=float))
-    tmp.replace(done)  # atomic: a crash leaves the old file or none
+    _write_json_atomic(done, {"case": case, "code": code, "row": row})
     return row
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _write_json_atomic(path: Path, obj: Any) -> None:
+    """Write-then-rename with a name unique to this process: a crash leaves the old file or none."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(obj, indent=2, default=float))
+    tmp.replace(path)
 
 
 def run_selftest(out: str | Path, seed: int = 7, workers: int = 2, cases: list[dict] | None = None,
@@ -141,9 +162,10 @@ def run_selftest(out: str | Path, seed: int = 7, workers: int = 2, cases: list[d
     else:
         rows = [run_case(c, str(out)) for c in cases]
     df = pd.DataFrame(rows)
-    df.to_csv(out / "selftest.csv", index=False)
-    summary = summarize(df)
-    (out / "selftest.json").write_text(json.dumps(summary, indent=2, default=float))
+    # a subset never overwrites the whole suite's files
+    stem = "selftest_subset" if only else "selftest"
+    df.to_csv(out / f"{stem}.csv", index=False)
+    _write_json_atomic(out / f"{stem}.json", summarize(df))
     return df
 
 

@@ -163,7 +163,9 @@ def chain_model(chain: Chain, **kwargs: Any) -> mujoco.MjModel:
 
 
 def to_mjcf(chain: Chain, meta: dict[str, Any] | None = None, **kwargs: Any) -> str:
-    """MJCF text of the exported cane: 1 ms ``discrete`` integrator (MuJoCo >= 4.0),
+    """MJCF text of the exported cane: 5 ms ``discrete`` integrator (MuJoCo >= 4.0; with it
+    springs, damping and a ``pid`` actuator's gains are implicit; an explicit controller
+    driving the ``motor`` with stiff gains needs a smaller ``dt``),
     a ``probe`` motor (ctrl = force in N along the probe direction), geoms
     that collide with a user's geoms; the chain's provenance and ``meta`` go
     into a ``canebench`` custom text element (JSON, ``model.text_data``)."""

@@ -156,10 +156,11 @@ def probe_dynamic(sim: Any, proto: Protocol, n_steps: int) -> ProbeTrace:
                 vmax = sim.run_controlled(pid, per, window)
                 x, v = sim.read()
                 f = pid.output(x, v)  # the force that holds the state just read
-            _check(proto, k, x, v, f, sp)
+            # the engine's own divergence flag first: it is the cause when the state it left is odd
             bad = sim.health()
             if bad:
                 raise Diverged(f"{bad} (step {k})")
+            _check(proto, k, x, v, f, sp)
             if vmax > proto.max_settle_velocity:
                 raise Diverged(
                     f"unsettled at step {k}: probe speed {vmax * 1e3:.3g} mm/s in the last "

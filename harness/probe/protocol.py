@@ -105,7 +105,8 @@ for _p, _tags in ((Protocol("paper", dt=25e-6, controller="harness",
                                         "by the harness"), ("paper", "reference")),
                   (Protocol("fast", dt=1e-3, controller="engine",
                             description="same physics and gains, 1 ms steps with the engine's implicit PID where "
-                                        "it has one"), ("default",))):
+                                        "it has one (an engine may take its own measured step: MuJoCo 5 ms, "
+                                        "Exudyn 10 ms, DART per chain)"), ("default",))):
     PROTOCOLS.add(_p.name, _p, _tags, _p.description)
 
 
