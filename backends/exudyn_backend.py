@@ -107,10 +107,71 @@ class ExudynProbeLoop(Simulation):
 
     #: set when a new harness sample or setpoint starts (a subclass may reuse work until then)
     _jacobian_stale = True
+    #: the fast protocol's GeneralizedAlpha spectral radius and Newton relative tolerance (per subclass)
+    fast_spectral_radius = FAST_SPECTRAL_RADIUS
+    fast_newton_rtol = FAST_NEWTON_RELATIVE_TOLERANCE
 
     def _output(self, kind: Any) -> Any:
         """The probe point's output of ``kind`` (exu.OutputVariableType)."""
         raise NotImplementedError
+
+    def _attach_probe(self, ground_marker: int | None) -> None:
+        """Attach the probe to ``self.marker``, set the loop's state and assemble ``self.mbs``.
+
+        ``ground_marker`` (native PID only): a ground marker at the probe point's rest
+        position, the far end of the CartesianSpringDamper that is the PID's P and D.
+        """
+        mbs = self.mbs
+        kp, _, kd = self.gains
+        self.setpoint = 0.0
+        self.integral = 0.0
+        self.csd = None
+        if ground_marker is not None:
+            self.csd = mbs.AddObject(CartesianSpringDamper(markerNumbers=[ground_marker, self.marker],
+                                                           stiffness=[kp, 0, 0], damping=[kd, 0, 0],
+                                                           offset=[0.0, 0.0, 0.0]))
+        # An explicit force along the probe rides on the connector's offset when there is a connector
+        # with stiffness (one probe-marker evaluation per residual, not two); otherwise it is a load.
+        self.load = None
+        self._apply: Callable[[float], None] = self._apply_on_offset
+        if self.csd is None or kp <= 0.0:
+            self.load = mbs.AddLoad(LoadForceVector(markerNumber=self.marker, loadVector=[0.0, 0.0, 0.0]))
+            self._apply = self._apply_as_load
+        self._controller: Callable[[float, float], float] | None = None
+        self._tail_from = 0
+        self._vmax = 0.0
+        self._step_count = 0
+        mbs.SetPreStepUserFunction(self._pre_step)
+        mbs.Assemble()
+
+    def _settings(self, native: bool) -> Any:
+        """Simulation settings shared by every Exudyn probe: one implicit GeneralizedAlpha step of ``dt``."""
+        s = self.sims = exu.SimulationSettings()
+        s.solution.file.write = False
+        s.solution.sensors.active = False
+        s.timeIntegration.verboseMode = 0
+        s.show.computationTime = False
+        s.timeIntegration.newton.useModifiedNewton = True
+        if native:
+            s.timeIntegration.generalizedAlpha.spectralRadius = self.fast_spectral_radius
+            s.timeIntegration.newton.relativeTolerance = self.fast_newton_rtol
+        else:
+            s.timeIntegration.generalizedAlpha.spectralRadius = 1.0  # the cane's own damping only
+        ti = s.timeIntegration
+        ti.startTime, ti.endTime, ti.numberOfSteps = 0.0, self.dt, 1  # fixes the step size: (end - start) / steps
+        return s
+
+    def _start_solver(self, jacobian: Callable[..., bool] | None = None) -> None:
+        """The solver lives as long as the simulation: each harness call only moves its end time."""
+        self.solver = exu.MainSolverImplicitSecondOrder()
+        if jacobian is not None:
+            self.solver.SetUserFunctionComputeNewtonJacobian(self.mbs, jacobian)
+        if not self.solver.InitializeSolver(self.mbs, self.sims):
+            raise exu.SolverError("Exudyn: InitializeSolver failed: " + self.solver.GetErrorString())
+        # SolveSystem (SolveDynamic) switches the sub-function CPU timers off; SolveSteps alone leaves them on
+        timer = self.solver.timer  # a copy: write it back
+        timer.useTimer = False
+        self.solver.timer = timer
 
     # state along the probe (x of the probe frame)
     def read(self) -> tuple[float, float]:
@@ -240,56 +301,17 @@ class ExudynSimulation(ExudynProbeLoop):
             objectNumber=kt, linkNumber=2 * chain.push_link + 1,
             localPosition=list(chain.local(chain.push_link, chain.push_point))))
         self.x0 = float((Rw @ chain.push_point)[0])
-        self.setpoint = 0.0
-        self.integral = 0.0
-        kp, _, kd = self.gains
-        self.csd = None
+        mg = None
         if native:
             ground = mbs.AddObject(ObjectGround())
             mg = mbs.AddMarker(MarkerBodyPosition(bodyNumber=ground, localPosition=list(Rw @ chain.push_point)))
-            self.csd = mbs.AddObject(CartesianSpringDamper(markerNumbers=[mg, self.marker], stiffness=[kp, 0, 0],
-                                                           damping=[kd, 0, 0], offset=[0.0, 0.0, 0.0]))
-        # An explicit force along the probe rides on the connector's offset when there is a connector
-        # with stiffness (one probe-marker evaluation per residual, not two); otherwise it is a load.
-        self.load = None
-        self._apply: Callable[[float], None] = self._apply_on_offset
-        if self.csd is None or kp <= 0.0:
-            self.load = mbs.AddLoad(LoadForceVector(markerNumber=self.marker, loadVector=[0.0, 0.0, 0.0]))
-            self._apply = self._apply_as_load
-        self._controller: Callable[[float, float], float] | None = None
-        self._tail_from = 0
-        self._vmax = 0.0
-        self._step_count = 0
-        mbs.SetPreStepUserFunction(self._pre_step)
-        mbs.Assemble()
-
-        s = self.sims = exu.SimulationSettings()
-        s.solution.file.write = False
-        s.solution.sensors.active = False
-        s.timeIntegration.verboseMode = 0
-        s.show.computationTime = False
-        s.timeIntegration.newton.useModifiedNewton = True
-        if native:
-            s.timeIntegration.generalizedAlpha.spectralRadius = FAST_SPECTRAL_RADIUS
-            s.timeIntegration.newton.relativeTolerance = FAST_NEWTON_RELATIVE_TOLERANCE
-        else:
-            s.timeIntegration.generalizedAlpha.spectralRadius = 1.0  # the cane's own damping only
-        ti = s.timeIntegration
-        ti.startTime, ti.endTime, ti.numberOfSteps = 0.0, self.dt, 1  # fixes the step size: (end - start) / steps
-
-        # The solver lives as long as the simulation: each harness call only moves its end time.
-        self.solver = exu.MainSolverImplicitSecondOrder()
+        self._attach_probe(mg)
+        self._settings(native)
         self._jacobian: np.ndarray | None = None  # Newton matrix computed at the last setpoint change
         self._jacobian_stale = True  # set by a setpoint change: the next solve computes a fresh one
         self._reuse_request = False  # SolveSteps' own request at the start of a call may be answered from store
         self.jacobians_computed = 0
-        self.solver.SetUserFunctionComputeNewtonJacobian(mbs, self._newton_jacobian)
-        if not self.solver.InitializeSolver(mbs, s):
-            raise exu.SolverError("Exudyn: InitializeSolver failed: " + self.solver.GetErrorString())
-        # SolveSystem (SolveDynamic) switches the sub-function CPU timers off; SolveSteps alone leaves them on
-        timer = self.solver.timer  # a copy: write it back
-        timer.useTimer = False
-        self.solver.timer = timer
+        self._start_solver(self._newton_jacobian)
 
     def _output(self, kind: Any) -> Any:
         return self.mbs.GetMarkerOutput(self.marker, kind)

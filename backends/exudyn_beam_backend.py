@@ -55,15 +55,13 @@ extension); a full trial costs ~7x the MuJoCo chain.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any
 
 import exudyn as exu
 import numpy as np
 from exudyn.itemInterface import (
-    CartesianSpringDamper,
     Force,
     GenericJoint,
-    LoadForceVector,
     MarkerBodyRigid,
     MarkerNodePosition,
     MarkerNodeRigid,
@@ -131,6 +129,9 @@ def section(g, s_mid: float) -> exu.BeamSection:
 class ExudynBeamSimulation(ExudynProbeLoop):
     """The cane's continuum as geometrically exact beam elements, advanced by a persistent implicit solver."""
 
+    fast_spectral_radius = FAST_SPECTRAL_RADIUS
+    fast_newton_rtol = FAST_NEWTON_RELATIVE_TOLERANCE
+
     def __init__(self, chain: Chain, proto: Protocol, native: bool, n_elements: int = ELEMENTS,
                  dt: float | None = None) -> None:
         self.native_pid = native
@@ -183,47 +184,13 @@ class ExudynBeamSimulation(ExudynProbeLoop):
         self.node = nodes[st.push]
         self.marker = mbs.AddMarker(MarkerNodePosition(nodeNumber=self.node))
         self.x0 = float(P[st.push][0])
-        self.setpoint = 0.0
-        self.integral = 0.0
-        kp, _, kd = self.gains
-        self.csd = None
-        if native:
-            mg = mbs.AddMarker(MarkerBodyRigid(bodyNumber=ground, localPosition=list(map(float, P[st.push]))))
-            self.csd = mbs.AddObject(CartesianSpringDamper(markerNumbers=[mg, self.marker], stiffness=[kp, 0, 0],
-                                                           damping=[kd, 0, 0], offset=[0.0, 0.0, 0.0]))
-        self.load = None
-        self._apply: Callable[[float], None] = self._apply_on_offset
-        if self.csd is None or kp <= 0.0:
-            self.load = mbs.AddLoad(LoadForceVector(markerNumber=self.marker, loadVector=[0.0, 0.0, 0.0]))
-            self._apply = self._apply_as_load
-        self._controller: Callable[[float, float], float] | None = None
-        self._tail_from = 0
-        self._vmax = 0.0
-        self._step_count = 0
-        mbs.SetPreStepUserFunction(self._pre_step)
-        mbs.Assemble()
-
-        s = self.sims = exu.SimulationSettings()
-        s.solution.file.write = False
-        s.solution.sensors.active = False
-        s.timeIntegration.verboseMode = 0
-        s.show.computationTime = False
+        mg = mbs.AddMarker(MarkerBodyRigid(bodyNumber=ground, localPosition=list(map(float, P[st.push])))) \
+            if native else None
+        self._attach_probe(mg)
+        s = self._settings(native)
         s.linearSolver.solverType = exu.LinearSolverType.EigenSparse
-        s.timeIntegration.newton.useModifiedNewton = True
         s.timeIntegration.newton.absoluteTolerance = NEWTON_ABSOLUTE_TOLERANCE
-        if native:
-            s.timeIntegration.generalizedAlpha.spectralRadius = FAST_SPECTRAL_RADIUS
-            s.timeIntegration.newton.relativeTolerance = FAST_NEWTON_RELATIVE_TOLERANCE
-        else:
-            s.timeIntegration.generalizedAlpha.spectralRadius = 1.0
-        ti = s.timeIntegration
-        ti.startTime, ti.endTime, ti.numberOfSteps = 0.0, self.dt, 1
-        self.solver = exu.MainSolverImplicitSecondOrder()
-        if not self.solver.InitializeSolver(mbs, s):
-            raise exu.SolverError("Exudyn: InitializeSolver failed: " + self.solver.GetErrorString())
-        timer = self.solver.timer
-        timer.useTimer = False
-        self.solver.timer = timer
+        self._start_solver()
 
     def _output(self, kind: Any) -> Any:
         return self.mbs.GetNodeOutput(self.node, kind)
