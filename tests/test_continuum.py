@@ -217,54 +217,6 @@ def test_exudyn_beam_bundled_cane_against_the_beam(bundled_trials):
     assert abs(k / kb - 1) < TOL_REFERENCE["exudyn_beam"]
 
 
-def _exudyn_free_vibration(section_damping: float, connector_damping: float) -> np.ndarray:
-    """Tip displacement of a 4-element Exudyn beam cantilever released under a step load (1 ms steps)."""
-    import exudyn as exu
-    from exudyn.itemInterface import (Force, GenericJoint, MarkerBodyRigid, MarkerNodeRigid, NodeRigidBodyRotVecLG,
-                                      ObjectBeamGeometricallyExact, ObjectConnectorRigidBodySpringDamper,
-                                      ObjectGround, SensorNode)
-
-    n, d = 4, 0.012
-    A, I = np.pi * d**2 / 4, np.pi * d**4 / 64
-    C = np.diag([E * A, E / 2.6 * A, E / 2.6 * A, E * I / 1.3, E * I, E * I])
-    SC = exu.SystemContainer()
-    mbs = SC.AddSystem()
-    R = np.array([[0.0, 0, -1], [0, 1, 0], [1, 0, 0]])  # x axis along world z
-    from scipy.spatial.transform import Rotation
-
-    rv = list(Rotation.from_matrix(R).as_rotvec())
-    nodes = [mbs.AddNode(NodeRigidBodyRotVecLG(referenceCoordinates=[0, 0, L * i / n] + rv)) for i in range(n + 1)]
-    for i in range(n):
-        sec = exu.BeamSection()
-        sec.stiffnessMatrix, sec.dampingMatrix = C, section_damping * C
-        sec.massPerLength, sec.inertia = 580 * A, 580 * np.diag([2 * I, I, I])
-        mbs.AddObject(ObjectBeamGeometricallyExact(nodeNumbers=[nodes[i], nodes[i + 1]], length=L / n,
-                                                   sectionData=sec))
-        if connector_damping:
-            mk = [mbs.AddMarker(MarkerNodeRigid(nodeNumber=nodes[j])) for j in (i, i + 1)]
-            mbs.AddObject(ObjectConnectorRigidBodySpringDamper(
-                markerNumbers=mk, stiffness=np.zeros((6, 6)),
-                damping=np.diag([0, 0, 0, 1, 1, 1]) * connector_damping * E * I / (L / n)))
-    g = mbs.AddObject(ObjectGround())
-    HT = np.eye(4)
-    HT[:3, :3] = R
-    mbs.AddObject(GenericJoint(markerNumbers=[mbs.AddMarker(MarkerBodyRigid(bodyNumber=g, localHT=HT)),
-                                              mbs.AddMarker(MarkerNodeRigid(nodeNumber=nodes[0]))],
-                               constrainedAxes=[1] * 6))
-    mbs.AddLoad(Force(markerNumber=mbs.AddMarker(MarkerNodeRigid(nodeNumber=nodes[-1])), loadVector=[0.01, 0, 0]))
-    sensor = mbs.AddSensor(SensorNode(nodeNumber=nodes[-1], storeInternal=True,
-                                      outputVariableType=exu.OutputVariableType.Displacement))
-    mbs.Assemble()
-    s = exu.SimulationSettings()
-    s.solution.file.write = False
-    s.timeIntegration.verboseMode = 0
-    s.timeIntegration.newton.absoluteTolerance = 1e-6
-    s.timeIntegration.generalizedAlpha.spectralRadius = 1.0
-    s.timeIntegration.endTime, s.timeIntegration.numberOfSteps = 0.3, 300
-    mbs.SolveDynamic(s)
-    return np.asarray(mbs.GetSensorStoredData(sensor))[:, 1]
-
-
 def test_exudyn_beam_element_ignores_its_section_damping_matrix():
     """Why the exudyn_beam backend damps through connectors: Exudyn 1.13's
     ObjectBeamGeometricallyExact accepts BeamSection.dampingMatrix without
@@ -273,9 +225,11 @@ def test_exudyn_beam_element_ignores_its_section_damping_matrix():
     no damping and with damping = 1 s x stiffness, while relative rotational
     dampers change it. If this fails, Exudyn now honours the matrix and the
     backend could use it instead."""
-    undamped = _exudyn_free_vibration(0.0, 0.0)
-    section = _exudyn_free_vibration(1.0, 0.0)
-    connectors = _exudyn_free_vibration(0.0, 0.01)
+    from canebench.reports.continuum_engine_findings import exudyn_free_vibration
+
+    undamped = exudyn_free_vibration(0.0, 0.0)
+    section = exudyn_free_vibration(1.0, 0.0)
+    connectors = exudyn_free_vibration(0.0, 0.01)
     amplitude = np.ptp(undamped)
     assert amplitude > 0
     assert np.max(np.abs(section - undamped)) < 1e-9 * amplitude
