@@ -51,18 +51,23 @@ LIBRARY = ("modulus_scale", "root_compliance", "rig_compliance", "base_flare", "
 OUT_OF_LIBRARY = ("lateral_support",)
 
 
-def random_strength(name: str, rng: np.random.Generator) -> dict[str, float]:
-    """A random strength of one effect (what the self-test hides)."""
+def random_strength(name: str, rng: np.random.Generator, strong: bool = False) -> dict[str, float]:
+    """A random strength of one effect (what the self-test hides).
+
+    ``strong`` draws from the upper part of each range only (the two-effect sets: a
+    pair tests whether two effects are told apart, which needs each to be visible).
+    """
     if name == "modulus_scale":
-        return {"scale": float(np.exp(rng.choice([-1, 1]) * rng.uniform(0.15, 0.7)))}
+        return {"scale": float(np.exp(rng.choice([-1, 1]) * rng.uniform(0.35 if strong else 0.15, 0.7)))}
     if name == "root_compliance":
-        return {"k_root": float(np.exp(rng.uniform(np.log(3.0), np.log(150.0))))}
+        return {"k_root": float(np.exp(rng.uniform(np.log(3.0), np.log(30.0 if strong else 150.0))))}
     if name == "rig_compliance":
-        return {"k_rig": float(np.exp(rng.uniform(np.log(40.0), np.log(1500.0))))}
+        return {"k_rig": float(np.exp(rng.uniform(np.log(40.0), np.log(250.0 if strong else 1500.0))))}
     if name == "base_flare":
-        return {"collar": float(rng.uniform(0.3, 1.2)), "length_m": float(rng.uniform(0.12, 0.4))}
+        return {"collar": float(rng.uniform(0.7 if strong else 0.3, 1.2)),
+                "length_m": float(rng.uniform(0.2 if strong else 0.12, 0.4))}
     if name == "probe_misalignment":
-        return {"angle_deg": float(rng.choice([-1, 1]) * rng.uniform(15.0, 35.0))}
+        return {"angle_deg": float(rng.choice([-1, 1]) * rng.uniform(28.0 if strong else 15.0, 35.0))}
     if name == "obstruction":
         return {"fraction": 0.25}
     if name == "lateral_support":

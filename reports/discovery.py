@@ -74,17 +74,26 @@ def section(folder: str | Path) -> str:
                        if k in n.get("ci95", {}) else f"{k} = {v:.4g}" for k, v in n["params"].items())
         if n["effect"] == "obstruction":
             ps = f"{n.get('n_trials', len(n.get('local', {})))} trial(s): " + ", ".join(
-                f"{t} at {v['onset_mm']:.1f} mm" for t, v in n.get("local", {}).items())
+                f"{t} at {v['onset_mm']:.1f} mm" + (" (soft contact before it: left out)" if v.get("excluded") else "")
+                for t, v in n.get("local", {}).items())
         rows.append(f"<tr><td>{html.escape(n['effect'])}</td><td>{n['scope']}</td><td>{html.escape(ps)}</td></tr>")
     eng = ""
     if "per_backend" in g:
         eng = "<table><tr><th>backend</th><th>before median / worst</th><th>after (in sample)</th>" \
-              "<th>after, out of sample</th><th>screen vs engine (max |d ln k|)</th></tr>" + "".join(
+              "<th>after, out of sample</th><th>screen vs engine (max |d ln k|): anchored / linear only</th></tr>" + "".join(
             f"<tr><td>{b}</td><td>{v['before_median']:.3f} / {v['before_worst']:.3f}</td>"
             f"<td>{v['after_median']:.3f} / {v['after_worst']:.3f}</td>"
-            f"<td>{v['after_cv_median']:.3f} / {v['after_cv_worst']:.3f}</td><td>{v['screen_vs_engine_max']:.2g}</td></tr>"
+            f"<td>{v['after_cv_median']:.3f} / {v['after_cv_worst']:.3f}</td><td>{v['screen_vs_engine_max']:.2g} / "
+            f"{v.get('linear_screen_vs_engine_max', float('nan')):.2g}</td></tr>"
             for b, v in g["per_backend"].items()) + "</table>"
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in doc.get("notes", []))
+    anc = doc.get("anchors") or []
+    if anc:
+        last = anc[-1]
+        notes += (f"<li>the screen was re-anchored on the {html.escape(str(last['engine']))} engine {len(anc)} time(s) "
+                  f"after the named effects; before each re-anchoring the engine differed from the screen by at most "
+                  f"{max(a['engine_minus_screen_max_abs'] for a in anc):.3g} in ln k, at the last by "
+                  f"{last['engine_minus_screen_max_abs']:.3g}</li>")
     bs = doc.get("between_cane_share", {})
     return f"""
 <h2>Discovery: what the model misses</h2>

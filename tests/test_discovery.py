@@ -184,6 +184,97 @@ def test_onset_finds_kinks_not_curvature():
     assert detect_onset(x, 0.05 * x + noise) is None
 
 
+def _rig(x: np.ndarray, f: np.ndarray):
+    from canebench.data.rig import RigTrial
+
+    return RigTrial("synthetic.csv", x, f, 0.5 * np.arange(len(x)), 500.0)
+
+
+def test_a_soft_contact_hidden_in_the_tare_stretch_is_an_obstruction():
+    """A cane rising 0.5 gf/mm (8 gf over 16 mm, noise 2 gf) before a second body adds 3 gf/mm:
+    the field stage's flat-then-line knee lands on the second body, the early-contact check
+    finds the ramp; a flat tare, and a contact start that is merely lumpy, are left alone."""
+    from canebench.discovery.onsets import detect_early_contact
+    from canebench.measure.field import extract_field_stiffness
+
+    rng = np.random.default_rng(5)
+    x = np.arange(0, 50, 0.5)
+    contact, onset = 6.0, 16.0
+    cane = 0.5 * np.maximum(x - contact, 0)
+    second = 3.0 * np.maximum(x - contact - onset, 0)
+    f = -15.0 + cane + second + rng.normal(0, 2.0, len(x))
+    fit = extract_field_stiffness(_rig(x, f))
+    # the failure this exists for: the field stage takes the ramp for tare
+    assert fit.onset_mm > contact + 0.6 * onset
+    e = detect_early_contact(x, f, fit.onset_mm)
+    assert e is not None
+    assert abs(e.contact_mm - contact) <= 3.0 and abs(e.contact_mm + e.onset_mm - (contact + onset)) <= 3.0
+    assert e.slope_after > 4 * e.slope_before
+    # a flat tare stretch, then a cane: nothing before the knee
+    flat = -15.0 + 4.0 * np.maximum(x - 10.0, 0) + rng.normal(0, 2.0, len(x))
+    assert detect_early_contact(x, flat, extract_field_stiffness(_rig(x, flat)).onset_mm) is None
+    # a lumpy start (3.3 then 5.9 gf/mm, as real b6c2t1): the slope ratio is below MIN_RATIO
+    lumpy = -5.0 + 3.3 * np.clip(x - 2.5, 0, 3.0) + 5.9 * np.maximum(x - 5.5, 0) + rng.normal(0, 2.0, len(x))
+    assert detect_early_contact(x, lumpy, 5.5) is None
+    # long tare stretches (5-40 mm) before clean contacts of any stiffness: the flat level's own
+    # uncertainty must not pass for a ramp (an earlier version flagged 2 in 360 of these)
+    flagged = []
+    for _ in range(150):
+        tare = rng.uniform(5, 40)
+        xx = np.arange(0, tare + 40, 0.5)
+        ff = rng.uniform(-60, 10) + rng.uniform(0.3, 20) * np.maximum(xx - tare, 0) + rng.normal(0, 2.0, len(xx))
+        if detect_early_contact(xx, ff, extract_field_stiffness(_rig(xx, ff)).onset_mm) is not None:
+            flagged.append(tare)
+    assert flagged == []
+
+
+@pytest.mark.field
+def test_no_real_trial_has_a_hidden_soft_contact(field_dir):
+    """Of the 54 real trials, only four have ten or more samples before the contact knee, and
+    none of those rises softly and then steepens: the check must not remove real data."""
+    from canebench.data.dataset import load_dataset
+    from canebench.data.rig import read_rig_csv
+    from canebench.discovery.onsets import detect_early_contact
+    from canebench.measure.field import extract_field_stiffness
+
+    hits = []
+    for t in load_dataset(field_dir):
+        rig = read_rig_csv(t.csv)
+        if detect_early_contact(rig.displacement_mm, rig.force_gf, extract_field_stiffness(rig).onset_mm):
+            hits.append(t.id)
+    assert hits == []
+
+
+def test_an_anchored_screen_is_the_same_screen_moved_to_the_anchor(bundled_trials):
+    """Re-anchoring on an engine changes only the linearization point: with the anchor's
+    stiffness taken from the screen itself, every prediction is the un-anchored one (the rig's
+    series part included), and at the anchor the prediction is the anchor's stiffness."""
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.model.effects import EffectSpec
+    from canebench.model.presets import PRESETS
+
+    cfg = PRESETS["beam-consistent"]
+    ss = ScreenSet.build([trial_geometry(t, cfg) for t in bundled_trials[:9]])
+    lkb = np.log(np.linspace(0.01, 0.3, len(ss.trials)))
+    anchor = (EffectSpec.parse("root_compliance(k_root=20)"), EffectSpec.parse("rig_compliance(k_rig=300)"))
+    lka = predict_log_k(ss, lkb, anchor)
+    sa = ss.anchored(anchor)
+    for specs in [(), (EffectSpec.parse("rig_compliance(k_rig=80)"),),
+                  (EffectSpec.parse("base_flare(excess_mm=6, length_mm=200)"),
+                   EffectSpec.parse("probe_misalignment(angle_deg=20)"),
+                   EffectSpec.parse("rig_compliance(k_rig=1000)"))]:
+        np.testing.assert_allclose(predict_log_k(sa, lka, specs), predict_log_k(ss, lkb, specs), rtol=0, atol=1e-10)
+    # and the anchor survives subsetting (cross-validation folds) and resampling (the bootstrap)
+    from canebench.discovery.fit import _take
+
+    keep = np.arange(len(ss.trials)) % 2 == 0
+    np.testing.assert_allclose(predict_log_k(sa.subset(keep), lka[keep], ()), lkb[keep], rtol=0, atol=1e-10)
+    rows = np.array([0, 0, 3, 5, 8])
+    tk = _take(sa, rows, np.array(["a", "a", "b", "c", "d"]))
+    np.testing.assert_allclose(predict_log_k(tk, lka[rows], ()), lkb[rows], rtol=0, atol=1e-10)
+
+
 @pytest.mark.field
 def test_onset_on_the_real_elbow(field_dir):
     from canebench.data.dataset import load_dataset
@@ -256,6 +347,14 @@ def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root
     for b, v in g["per_backend"].items():
         assert v["after_median"] < 0.5 * v["before_median"], b
         assert v["screen_vs_engine_max"] < 0.05, b
+    # the linear screen alone (from the baseline run, no re-anchoring) against the engines' change:
+    # within 5 % (gravity on a cane leaning on its root spring is what it misses)
+    for b, v in g["per_backend"].items():
+        assert v["linear_screen_vs_engine_max"] < 0.05, b
+    # the screen was re-anchored on the beam: the first anchor run measures the linear screen's
+    # error at the fitted spring, which is what a second effect would otherwise have absorbed
+    first = doc["anchors"][0]
+    assert first["step"] == 1 and first["n_failed"] == 0 and 1e-4 < first["engine_minus_screen_max_abs"] < 0.05
     cfg = load_model_file(out / "model.yaml")
     assert [e.name for e in cfg.effects] == ["root_compliance"]
     assert (out / "report.html").read_text().count("Discovery") >= 1
@@ -324,3 +423,10 @@ def test_direction_test_holds_its_level_on_nulls_and_sees_a_global_shift():
         assert np.sum(np.array(ps) < 0.05) <= 7, (project, np.sort(ps)[:10])  # 3 expected; P(>= 8) = 0.02
     # a shift the size of the cane scatter (the hidden-effect suite's scale cases) on 18 canes
     assert np.median([p_of("modulus_scale", draw(np.log(1.37))) for _ in range(10)]) < 0.01
+    # the selection's pair step: one test whose max runs over several pairs' joint grids, calibrated
+    # by the same sign flips. 100 nulls at 0.05: 5 expected; 11 or more has probability 0.011 at the
+    # nominal level and 0.58 at 0.10
+    union = [("rig_compliance", "base_flare"), ("root_compliance", "modulus_scale"),
+             ("probe_misalignment", "root_compliance")]
+    ps = np.array([p_of(union, draw(0.0)) for _ in range(100)])
+    assert np.sum(ps < 0.05) < 11, np.sort(ps)[:20]

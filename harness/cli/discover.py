@@ -17,6 +17,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--backends", help="engines re-run before/after with the fitted model (default: the baseline's)")
     p.add_argument("--candidates", help="comma-separated effects to screen (default: the library's global effects)")
     p.add_argument("--alpha", type=float, default=0.05, help="family-wise significance per selection step")
+    p.add_argument("--min-change", type=float, default=0.05,
+                   help="materiality: smallest mean |change in ln k| an effect must make to be named")
     p.add_argument("--bootstrap", type=int, default=100, help="cane-bootstrap replicates of the intervals")
     p.add_argument("--no-confirm", action="store_true", help="skip re-running the engines with the fitted model")
     p.add_argument("--selftest", action="store_true", help="run the seeded hidden-effect suite instead")
@@ -51,7 +53,7 @@ def main(a: argparse.Namespace) -> int:
     backends = [b.strip() for b in a.backends.split(",")] if a.backends else None
     cands = tuple(c.strip() for c in a.candidates.split(",")) if a.candidates else None
     res = discover(trials, a.baseline, backends, a.out, ex, cands, a.alpha, a.bootstrap, confirm=not a.no_confirm,
-                   progress=Progress())
+                   progress=Progress(), min_change=a.min_change)
     doc = res.to_json()
     g = doc["gap"]
     print(f"canebench discover: {len(trials)} trials, baseline {res.baseline}")
@@ -73,7 +75,8 @@ def main(a: argparse.Namespace) -> int:
           f"{g['before']['worst_abs_log_ratio']:.3f} -> {g['after_cv']['worst_abs_log_ratio']:.3f}")
     for b, v in g.get("per_backend", {}).items():
         print(f"  {b:10s} before {v['before_median']:.3f}  after {v['after_median']:.3f} (in sample)  "
-              f"{v['after_cv_median']:.3f} (out of sample)  screen vs engine {v['screen_vs_engine_max']:.2g}")
+              f"{v['after_cv_median']:.3f} (out of sample)  screen vs engine {v['screen_vs_engine_max']:.2g} "
+              f"(linear screen alone {v.get('linear_screen_vs_engine_max', float('nan')):.2g})")
     print(f"  unexplained structure left: {doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")
     return 0

@@ -144,7 +144,7 @@ def fit_candidate(cand: Candidate, ss: ScreenSet, log_k_field: np.ndarray, log_k
         s2, t2 = variance_components(r, groups)
         return Fit(cand, np.zeros(0), fixed, v, s2, t2, len(r))
     starts = [x0] if x0 is not None else []
-    grid = cand.grid()
+    grid = cand.grid(7 if len(cand.free) <= 2 else 5)
     vals = [obj(g) for g in grid]
     order = np.argsort(vals)
     starts += [grid[i] for i in order[:2]]
@@ -245,7 +245,7 @@ def _fitted_directions(ss: ScreenSet, log_k_base: np.ndarray, fixed: tuple[Effec
     return np.column_stack(cols) if cols else np.zeros((len(base), 0))
 
 
-def direction_test_p(name: str, ss: ScreenSet, log_k_field: np.ndarray, log_k_base: np.ndarray,
+def direction_test_p(name: str | tuple[str, ...] | list[tuple[str, ...]], ss: ScreenSet, log_k_field: np.ndarray, log_k_base: np.ndarray,
                      fixed: tuple[EffectSpec, ...], s2: float, t2: float, n_per: int = 9, n_perm: int = 20000,
                      seed: int = 0, project_fitted: bool = False) -> float:
     """p that the residuals of the current model lean the way effect ``name`` would move them.
@@ -276,7 +276,14 @@ def direction_test_p(name: str, ss: ScreenSet, log_k_field: np.ndarray, log_k_ba
     effect to both out-of-library sets, with no gain elsewhere (README, "Discovery");
     a false name costs more than a late one.
     """
-    cand = Candidate.of((name,))
+    # one effect, effects tested jointly (a tuple), or a union of such sets (a list: the max
+    # runs over all of their directions, so "some pair leans the residuals" is one test)
+    if isinstance(name, str):
+        sets = [(name,)]
+    elif isinstance(name, list):
+        sets = [(n,) if isinstance(n, str) else tuple(n) for n in name]
+    else:
+        sets = [tuple(name)]
     base = predict_log_k(ss, log_k_base, fixed)
     r = log_k_field - base
     uniq, inv, counts = np.unique(ss.canes, return_inverse=True, return_counts=True)
@@ -290,7 +297,12 @@ def direction_test_p(name: str, ss: ScreenSet, log_k_field: np.ndarray, log_k_ba
         VQ = np.column_stack([vinv(q) for q in Q.T])
         G = Q.T @ VQ
     cols = []
-    for x in cand.grid(n_per):
+    points = []
+    for names in sets:
+        cand = Candidate.of(names)
+        # a joint grid over 3+ parameters: 125 directions, not 729
+        points += [(cand, x) for x in cand.grid(min(n_per, 5) if len(cand.free) > 2 else n_per)]
+    for cand, x in points:
         pch = predict_log_k(ss, log_k_base, fixed + cand.specs(x)) - base
         if not np.all(np.isfinite(pch)) or np.max(np.abs(pch)) < 1e-9:
             continue  # the effect's null point (or an undefined one) is no direction
@@ -343,4 +355,4 @@ def _take(ss: ScreenSet, rows: np.ndarray, labels: np.ndarray) -> ScreenSet:
     idx = np.concatenate([np.full(len(p), k) for k, p in enumerate(parts)])
     return ScreenSet([ss.trials[i] for i in rows], np.asarray(labels), idx, ss.s[pts], ss.w[pts], ss.d0[pts],
                      ss.kaa[pts], ss.kae[pts], ss.kee[pts], ss.raa[rows], ss.rae[rows], ss.ree[rows], ss.E[rows],
-                     ss.th0[rows], ss.min_d, ss.c0[rows])
+                     ss.th0[rows], ss.min_d, ss.c0[rows], ss.s0, ss.anchor)

@@ -24,6 +24,7 @@ step beyond the sample spacing.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,3 +76,68 @@ def detect_onset(x_mm: np.ndarray, f_n: np.ndarray) -> Onset | None:
     if ratio < MIN_SSE_RATIO or snr < MIN_SNR:
         return None
     return Onset(float(x[b]), float(k1), float(k1 + k2), float(ratio), snr)
+
+
+#: t statistic the pre-contact ramp's slope must reach (a flat tare stretch has |t| of a few at most)
+MIN_RAMP_T = 6.0
+#: and its rise over the ramp, in units of the tare stretch's noise
+MIN_RAMP_RISE = 3.0
+
+
+@dataclass
+class EarlyContact:
+    """Contact began before the field stage's onset: a soft ramp, then a slope ``MIN_RATIO`` times steeper.
+
+    The field stage's contact knee is then the obstruction's onset, and its stiffness is
+    the obstruction's, not the cane's.
+    """
+
+    contact_mm: float  # where the ramp starts (record displacement)
+    onset_mm: float  # obstruction onset after that contact
+    slope_before: float  # gf/mm
+    slope_after: float  # gf/mm
+    t: float
+
+
+def detect_early_contact(x_mm: np.ndarray, f_gf: np.ndarray, knee_mm: float) -> EarlyContact | None:
+    """A soft contact hidden in the stretch the field stage took for the tare.
+
+    A cane much softer than what engages later (a second body) can rise by only a few gf
+    before the obstruction engages: the field stage's flat-then-line knee then lands on the
+    obstruction, and the elbow is invisible in the contact trace. Before the knee, a
+    flat-then-line hinge is fitted (level and slope jointly, at least ``MIN_SIDE`` samples
+    on each side); a ramp is reported when its slope's t statistic reaches
+    :data:`MIN_RAMP_T`, it rises :data:`MIN_RAMP_RISE` times the noise, and the slope after
+    the knee (first 10 mm) is at least ``MIN_RATIO`` times the ramp's. A stretch of tare and
+    noise gives no such ramp; a lumpy but continuous contact start fails the ratio.
+    """
+    x = np.asarray(x_mm, float)
+    f = np.asarray(f_gf, float)
+    i0 = int(np.searchsorted(x, knee_mm - 1e-9))
+    if i0 < 2 * MIN_SIDE:
+        return None
+    xp, fp = x[:i0], f[:i0]
+    one = np.ones(i0)
+    best = None
+    # flat level and ramp slope fitted jointly (the level's own uncertainty enters the slope's
+    # standard error), with at least MIN_SIDE samples on each side of the ramp's start
+    for b in range(MIN_SIDE - 1, i0 - MIN_SIDE):
+        A = np.column_stack([one, np.maximum(xp - xp[b], 0.0)])
+        coef, sse = _lstsq_sse(A, fp)
+        if best is None or sse < best[0]:
+            best = (sse, b, coef, A)
+    sse, b, coef, A = best
+    k1 = float(coef[1])
+    s2 = sse / max(i0 - 2, 1)
+    cov = s2 * np.linalg.inv(A.T @ A)
+    t = k1 / math.sqrt(cov[1, 1]) if cov[1, 1] > 0 else 0.0
+    rise = k1 * float(xp[-1] - xp[b])
+    after = (x >= x[i0]) & (x <= x[i0] + 10.0)
+    if after.sum() < MIN_SIDE:
+        return None
+    k2 = float(np.polyfit(x[after], f[after], 1)[0])
+    # the ramp must also rise clearly out of the noise (a fraction of a gf/mm over a long tare is
+    # drift, not a cane)
+    if not (k1 > 0 and t >= MIN_RAMP_T and rise >= MIN_RAMP_RISE * math.sqrt(s2) and k2 >= MIN_RATIO * k1):
+        return None
+    return EarlyContact(float(x[b]), float(x[i0] - x[b]), k1, k2, float(t))

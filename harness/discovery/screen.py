@@ -19,7 +19,10 @@ by the baseline simulation: the predicted stiffness of a trial is
 
     1 / k_pred = (1 / k_base) C_cane(theta) / C_cane(0) + C_series(theta)
 
-with k_base the baseline engine's stiffness of that trial.
+with k_base the baseline engine's stiffness of that trial. Anchored on an engine
+run with effects theta_a (:meth:`~canebench.discovery.screenset.ScreenSet.anchored`),
+k_base is that run's stiffness and the formula becomes
+1 / k_pred = (1 / k_a - C_series(theta_a)) C_cane(theta) / C_cane(theta_a) + C_series(theta).
 """
 
 from __future__ import annotations

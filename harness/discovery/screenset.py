@@ -6,6 +6,15 @@ The probe direction enters through u = cos(th) a + sin(th) e_z (a the
 horizontal azimuth, th the pitch that makes u perpendicular to the cane at
 the probe plus any extra pitch), so each quadrature point stores the three
 coefficients of u^T K u in (cos th, sin th).
+
+The screen is linear; the engines are not (gravity acting on a cane that
+leans on a soft root, large deflection, the fit window). It is therefore
+used relative to an anchor: a model the baseline engine has actually been
+run with (:meth:`ScreenSet.anchored`). At the anchor the prediction is the
+engine's answer exactly; away from it only the change in compliance is
+linearized. The workflow re-anchors on the engine after every effect it
+names, so a second effect is never asked to absorb the first one's
+linearization error.
 """
 
 from __future__ import annotations
@@ -45,7 +54,9 @@ class ScreenSet:
     E: np.ndarray  # (n,) stated modulus
     th0: np.ndarray  # (n,) pitch (rad) of the perpendicular probe
     min_d: float
-    c0: np.ndarray  # (n,) baseline cane compliance (no effects)
+    c0: np.ndarray  # (n,) cane compliance at the anchor (no effects unless anchored)
+    s0: float = 0.0  # series compliance (m/N) at the anchor
+    anchor: tuple = ()  # the EffectSpecs the anchor's engine stiffness was computed with
 
     @classmethod
     def build(cls, geoms: list[TrialGeometry]) -> "ScreenSet":
@@ -77,7 +88,14 @@ class ScreenSet:
         return ScreenSet([t for t, k in zip(self.trials, keep) if k], self.canes[keep], new_index[self.idx[pts]],
                          self.s[pts], self.w[pts], self.d0[pts], self.kaa[pts], self.kae[pts], self.kee[pts],
                          self.raa[keep], self.rae[keep], self.ree[keep], self.E[keep], self.th0[keep], self.min_d,
-                         self.c0[keep])
+                         self.c0[keep], self.s0, self.anchor)
+
+    def anchored(self, specs: tuple[EffectSpec, ...]) -> "ScreenSet":
+        """The same trials, with predictions relative to an engine run of the model ``specs``."""
+        from dataclasses import replace
+
+        cc, series = self.compliance(AppliedEffects([s.instance() for s in specs]))
+        return replace(self, c0=cc, s0=series, anchor=tuple(specs))
 
     def compliance(self, fx: AppliedEffects) -> tuple[np.ndarray, np.ndarray]:
         """(cane compliance (n,), series compliance (scalar)) under ``fx`` (global values)."""
@@ -99,12 +117,18 @@ M_PER_N_TO_MM_PER_N = 1e3
 
 
 def predict_log_k(ss: ScreenSet, log_k_base: np.ndarray, specs: tuple[EffectSpec, ...]) -> np.ndarray:
-    """ln k_pred per trial (k in N/mm): the baseline's stiffness scaled by the screened change."""
-    if not specs:
+    """ln k_pred per trial (k in N/mm) under the effects ``specs``.
+
+    ``log_k_base`` is the engine's stiffness at the screen's anchor (``ss.anchor``,
+    no effects unless :meth:`ScreenSet.anchored`): the cane part of its compliance
+    is scaled by the screened change and the series (rig) part replaced.
+    """
+    if tuple(specs) == tuple(ss.anchor):
         return log_k_base
     fx = AppliedEffects([s.instance() for s in specs])
     cc, series = ss.compliance(fx)
     # stiffness is in N/mm throughout the harness; the series compliance comes in m/N
-    inv = np.exp(-log_k_base) * (cc / ss.c0) + series * M_PER_N_TO_MM_PER_N
+    cane = np.exp(-log_k_base) - ss.s0 * M_PER_N_TO_MM_PER_N
+    inv = cane * (cc / ss.c0) + series * M_PER_N_TO_MM_PER_N
     with np.errstate(divide="ignore", invalid="ignore"):
         return -np.log(inv)
