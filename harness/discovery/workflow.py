@@ -17,8 +17,10 @@
    After each named effect the baseline engine is re-run with the model so
    far and the screen re-anchored on it (:func:`_reanchor`): the screen is
    linear, the engines are not. When no single effect passes, the pair with
-   the best BIC is tested jointly (level alpha / number of pairs): two effects
-   can cancel to first order. Repeated until nothing passes.
+   the best BIC is tested jointly: two effects can cancel to first order. Each
+   step's alpha is split in halves between the single effects (Bonferroni)
+   and the pair (one score test over every pair's joint directions).
+   Repeated until nothing passes.
 5. The fitted model (95 % cane-bootstrap intervals) as a model file; the
    baseline and the chosen backends re-run with it; before and after, out of
    sample.
@@ -38,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 from ..data.dataset import Trial
+from ..data.rig import read_rig_csv
 from ..execute.pipeline import field_stage
 from ..execute.runner import run_trials
 from ..model.config import ModelConfig
@@ -57,7 +60,7 @@ BASELINES = {
 }
 #: effects screened by default (obstruction is handled per trial from the traces)
 SCREENED = ("modulus_scale", "root_compliance", "rig_compliance", "base_flare", "probe_misalignment")
-ALPHA = 0.05  # family-wise, split over the candidates of a step (Bonferroni)
+ALPHA = 0.05  # family-wise per step: halves for the singles (Bonferroni) and the pair test
 MIN_OBSTRUCTED = 1  # trials with a detected onset needed to name the obstruction
 STRUCTURE_ALPHA = 0.01  # Bonferroni-adjusted p below which residual structure counts as unexplained
 MIN_REDUCTION = 0.05  # held-out mean |log ratio| per cane must fall by at least this fraction
@@ -145,6 +148,12 @@ def _net_change(ss: ScreenSet, lk_anchor: np.ndarray, specs: tuple[EffectSpec, .
     return float(np.mean(d[np.isfinite(d)])) if np.isfinite(d).any() else 0.0
 
 
+def _ok_log_k(res: pd.DataFrame, backend: str, order: pd.Series) -> np.ndarray:
+    """ln k_sim of ``backend``'s ok results, in the trial order ``order`` (NaN where not ok)."""
+    r = res[res.backend == backend].set_index("trial")
+    return np.log(r.k_sim.where(r.status == "ok").reindex(order).to_numpy(float))
+
+
 def _l1_by_cane(r: np.ndarray, canes: np.ndarray) -> np.ndarray:
     uniq, inv = np.unique(canes, return_inverse=True)
     return np.bincount(inv, np.abs(r)) / np.bincount(inv)
@@ -174,7 +183,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     candidates : tuple of str, optional
         Effects screened (default :data:`SCREENED`).
     alpha : float
-        Family-wise significance of one selection step (Bonferroni over candidates).
+        Family-wise significance of one selection step: split in halves between the single
+        candidates (Bonferroni) and the pair test when a pair can still be added.
     min_change : float
         Materiality: the smallest mean |change in ln k| over the trials that naming an effect must
         make to the fitted model (:data:`MIN_CHANGE`).
@@ -216,8 +226,6 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     by_id = {t.id: t for t in trials}
     for tid, fr in fields0.items():
         if fr.fit is not None and fr.fit.usable and by_id[tid].csv is not None and np.isfinite(fr.fit.onset_mm):
-            from ..data.rig import read_rig_csv
-
             rig = read_rig_csv(by_id[tid].csv)
             e = detect_early_contact(rig.displacement_mm, rig.force_gf, fr.fit.onset_mm)
             if e is not None:
@@ -271,12 +279,14 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     anchors: list[dict[str, Any]] = []
     stop = ""
 
-    def evaluate(add: tuple[str, ...], level: float, l1_cur: np.ndarray, test: Any = None) -> dict[str, Any]:
+    def evaluate(add: tuple[str, ...], level: float, l1_cur: np.ndarray, test: Any = None,
+                 full: Any = None) -> dict[str, Any]:
         """Fit ``current + add`` out of sample and test it against the current model.
 
-        ``test``: what the score test runs over (default ``add``'s own directions).
+        ``test``: what the score test runs over (default ``add``'s own directions); ``full``: the
+        all-canes fit when it is already at hand.
         """
-        cv = cross_validate(Candidate.of(current + add), ss, lkf, lkb)
+        cv = cross_validate(Candidate.of(current + add), ss, lkf, lkb, full=full)
         # per held-out cane: mean |ln k_field/k_pred| before minus after (robust: one bad
         # trace cannot sink a cane, as it would under the Gaussian density)
         diff = l1_cur - _l1_by_cane(cv.residual, ss.canes)
@@ -321,14 +331,15 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             # the pair with the best in-sample BIC is tried at level alpha / 2; its score test is the
             # max over every pair's joint directions (one test, whichever pair the BIC picked)
             pairs = list(itertools.combinations(remaining, 2))
-            bics = [fit_candidate(Candidate.of(current + pr), ss, lkf, lkb).bic for pr in pairs]
-            best_pair = pairs[int(np.argmin(bics))]
-            if min(bics) < min(t["cv"].fit.bic for t in tried):
-                tp = evaluate(best_pair, 0.5 * alpha, l1_cur, test=pairs)
+            fits = [fit_candidate(Candidate.of(current + pr), ss, lkf, lkb) for pr in pairs]
+            i = int(np.argmin([f.bic for f in fits]))
+            best_pair = pairs[i]
+            if fits[i].bic < min(t["cv"].fit.bic for t in tried):
+                tp = evaluate(best_pair, 0.5 * alpha, l1_cur, test=pairs, full=fits[i])
                 # no passenger: each member must matter beside the other (BIC and materiality)
                 single = {t["add"][0]: t for t in tried}
                 for m in best_pair:
-                    other = single[best_pair[1] if m == best_pair[0] else best_pair[0]]["cv"].fit
+                    other = single[next(n for n in best_pair if n != m)]["cv"].fit
                     if not (tp["cv"].fit.bic < other.bic
                             and _net_change(ss, lkb, tp["cv"].fit.specs, other.specs) >= min_change):
                         tp["passed"] = False
@@ -429,8 +440,7 @@ def _reanchor(trials, F, ss, lka, cv_cur, lkf, backend, proto, cfg0, obstruction
         cfg = cfg0.replace(effects=specs + obstruction)
         res = run_trials(sub, [backend], proto, cfg, outp / f"anchor_{step}_{it}" if outp else None,
                          executor=executor, progress=progress).to_df()
-        k = res.set_index("trial").k_sim.where(res.set_index("trial").status == "ok")
-        lk_eng = np.log(k.reindex(F.trial).to_numpy(float))
+        lk_eng = _ok_log_k(res, backend, F.trial)
         lk_lin = predict_log_k(ss, lka, specs)
         good = np.isfinite(lk_eng)
         dev = lk_eng - lk_lin
@@ -482,10 +492,8 @@ def _confirm(trials, backends, proto, cfg_b, model, F, ss, lka, lkb0, final, out
     lkf = np.log(F.k_field.to_numpy(float))
     rows = []
     for b in backends:
-        kb = rb[rb.backend == b].set_index("trial").k_sim.where(rb[rb.backend == b].set_index("trial").status == "ok")
-        ka = ra[ra.backend == b].set_index("trial").k_sim.where(ra[ra.backend == b].set_index("trial").status == "ok")
-        lb = np.log(kb.reindex(F.trial).to_numpy(float))
-        la = np.log(ka.reindex(F.trial).to_numpy(float))
+        lb = _ok_log_k(rb, b, F.trial)
+        la = _ok_log_k(ra, b, F.trial)
         before = lb - lkf
         after = la - lkf
         after_cv = lb + fold_change - lkf
