@@ -172,14 +172,17 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
 
                 Fcane = CubicSpline(xs, fs)
                 k_lin = rod.linear_stiffness()
-                mult = 1.0
-                if "lateral_support" in effects:
+
+                def support(E_s, d_s, u_s) -> float:
+                    """The lateral support's stiffening of this push (1 without it)."""
+                    if "lateral_support" not in effects:
+                        return 1.0
                     ls = effects["lateral_support"]
-                    s_s = ls["height_frac"] * L
-                    C = _compliance3(curve.at, dfun, E, sp, s_s, u)
+                    C = _compliance3(curve.at, d_s, E_s, sp, ls["height_frac"] * L, u_s)
                     ks = ls["k_support"]
-                    c_eff = C[0, 0] - C[0, 1] ** 2 * ks / (1 + ks * C[1, 1])
-                    mult = C[0, 0] / c_eff
+                    return C[0, 0] / (C[0, 0] - C[0, 1] ** 2 * ks / (1 + ks * C[1, 1]))
+
+                mult = support(E, dfun, u)
                 k_rig = effects.get("rig_compliance", {}).get("k_rig")
                 obstructed = "obstruction" in effects and rng.random() < effects["obstruction"]["fraction"]
                 onset = rng.uniform(8e-3, 30e-3) if obstructed else None
@@ -220,6 +223,24 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                 tr_truth[str(t_no)] = {"s": sp, "height": h, "pitch_deg": pitch, "k_linear_n_per_mm": k_lin * 1e-3,
                                        "k_effect_n_per_mm": k_eff * 1e-3, "k_plain_n_per_mm": k_plain * 1e-3,
                                        "support_multiplier": mult, "n_dead": n_dead}
+                # with several effects, each one's own share: the stiffness with that one taken out
+                # and the others kept (a soft root leaves a modulus scale little to act on)
+                stiff = [n for n in effects if n != "obstruction"]
+                if len(stiff) > 1:
+                    for drop in stiff:
+                        E_d = E0 * (effects["modulus_scale"]["scale"] if "modulus_scale" in effects
+                                    and drop != "modulus_scale" else 1.0)
+                        d_d = dplain if drop == "base_flare" else dfun
+                        spec_d = RodSpec(L, tangent, lambda s, E=E_d, d=d_d: E * np.pi * d(s) ** 4 / 64.0,
+                                         lambda s, d=d_d: 580.0 * np.pi * d(s) ** 2 / 4.0, NU, np.zeros(3),
+                                         np.array([0.0, 0.0, -9.81]),
+                                         base_compliance=0.0 if drop == "root_compliance" else c_root)
+                        u_d = u0 if drop == "probe_misalignment" else u
+                        m_d = 1.0 if drop == "lateral_support" else support(E_d, d_d, u_d)
+                        k_d = Rod(spec_d, sp, u_d, ELEMENTS).linear_stiffness() * m_d
+                        if k_rig and drop != "rig_compliance":
+                            k_d = 1.0 / (1.0 / k_d + 1.0 / k_rig)
+                        tr_truth[str(t_no)][f"k_without_{drop}_n_per_mm"] = k_d * 1e-3
                 if onset is not None:
                     truth["obstructed"][f"{cid}t{t_no}"] = onset * 1e3
             desc = {

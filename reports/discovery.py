@@ -95,13 +95,19 @@ def section(folder: str | Path) -> str:
                   f"{max(a['engine_minus_screen_max_abs'] for a in anc):.3g} in ln k, at the last by "
                   f"{last['engine_minus_screen_max_abs']:.3g}</li>")
     bs = doc.get("between_cane_share", {})
+    ad = doc.get("adequacy") or {}
+    if ad.get("after_cv"):
+        b, a = ad["before"], ad["after_cv"]
+        notes += (f"<li>adequacy ({html.escape(ad['test'])}): r = {b['r']:.2f} (p = {b['p']:.2g}) before, "
+                  f"r = {a['r']:.2f} (p = {a['p']:.2g}) after, over {a['n_canes']} canes; below p = {ad['alpha']} the "
+                  f"model is called incomplete</li>")
     return f"""
 <h2>Discovery: what the model misses</h2>
 <p>Baseline <b>{html.escape(doc['baseline'])}</b>. Median |ln(k_model/k_field)|
 {g['before']['median_abs_log_ratio']:.3f} (worst {g['before']['worst_abs_log_ratio']:.3f}) before;
 {g['after_cv']['median_abs_log_ratio']:.3f} (worst {g['after_cv']['worst_abs_log_ratio']:.3f}) after, out of sample
 (leave one cane out). Share of the residual variance between canes: {bs.get('before', float('nan')):.2f} before,
-{bs.get('after_cv', float('nan')):.2f} after. Unexplained structure left: <b>{doc['unexplained']}</b>.
+{bs.get('after_cv', float('nan')):.2f} after. Unexplained (residual structure, or a model that does not scale across canes as the data do): <b>{doc['unexplained']}</b>.
 Selection stopped: {html.escape(doc.get('stop_reason', ''))}.</p>
 <table><tr><th>named effect</th><th>scope</th><th>parameters (95 % cane-bootstrap interval)</th></tr>{''.join(rows) or '<tr><td colspan=3>nothing named</td></tr>'}</table>
 {eng}

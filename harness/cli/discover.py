@@ -38,7 +38,7 @@ def main(a: argparse.Namespace) -> int:
 
         out = Path(a.out if a.out != "canebench-runs/discover" else "canebench-runs/discover-selftest")
         df = run_selftest(out, a.seed, a.workers, only=a.selftest_cases)
-        cols = ["id", "named", "unexplained", "size", "gap_before", "gap_after_cv"] + \
+        cols = ["id", "named", "unexplained", "adequacy_p", "size", "gap_before", "gap_after_cv"] + \
                [c for c in df.columns if c.startswith("err_")]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
         print(json.dumps(summarize(df), indent=2, default=float))
@@ -77,6 +77,10 @@ def main(a: argparse.Namespace) -> int:
         print(f"  {b:10s} before {v['before_median']:.3f}  after {v['after_median']:.3f} (in sample)  "
               f"{v['after_cv_median']:.3f} (out of sample)  screen vs engine {v['screen_vs_engine_max']:.2g} "
               f"(linear screen alone {v.get('linear_screen_vs_engine_max', float('nan')):.2g})")
-    print(f"  unexplained structure left: {doc['unexplained']}")
+    ad = doc.get("adequacy", {}).get("after_cv")
+    if ad:
+        print(f"  adequacy (held-out residual vs the model's stiffness level, between {ad['n_canes']} canes): "
+              f"r = {ad['r']:.2f}, p = {ad['p']:.3g} (alpha {doc['adequacy']['alpha']})")
+    print(f"  unexplained (residual structure, or a model that does not scale as the data): {doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")
     return 0

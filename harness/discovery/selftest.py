@@ -64,6 +64,31 @@ def _effect_size(folder: Path) -> float:
     return float(np.median(vals)) if vals else 0.0
 
 
+def _suite_code(harness_code: str) -> str:
+    """canebench's fingerprint plus the generators' (they live in ``canes/``, outside it)."""
+    import hashlib
+
+    import canebench.canes.generate as g0
+    import canebench.canes.generate_hidden as g1
+
+    h = hashlib.sha256(harness_code.encode())
+    for m in (g0, g1):
+        h.update(Path(m.__file__).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _member_sizes(folder: Path) -> dict[str, float]:
+    """Each hidden effect's own share where there are several: median |ln(k_all / k_without_it)|."""
+    t = json.loads((folder / "truth" / "truth.json").read_text())
+    trials = [tr for c in t["canes"].values() for tr in c["trials"].values()]
+    out = {}
+    for key in (trials[0] if trials else {}):
+        if key.startswith("k_without_"):
+            name = key[len("k_without_"):-len("_n_per_mm")]
+            out[name] = float(np.median([abs(math.log(tr["k_effect_n_per_mm"] / tr[key])) for tr in trials]))
+    return out
+
+
 def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     """Score one case; a finished case is reused when its spec and canebench's code are unchanged.
 
@@ -79,7 +104,7 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
 
     folder = Path(root) / case["id"]
     done = folder / "selftest_row.json"
-    code = code_fingerprint()
+    code = _suite_code(code_fingerprint())
     spec = json.loads(json.dumps(case))
     if done.exists():
         try:
@@ -109,6 +134,14 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
                            "gap_before": doc["gap"]["before"]["median_abs_log_ratio"],
                            "gap_after_cv": doc["gap"]["after_cv"]["median_abs_log_ratio"]}
     row["correct"] = set(named) == hidden if case["kind"] != "out_of_library" else not named
+    members = _member_sizes(folder)
+    for name, v in members.items():
+        row[f"size_{name}"] = v
+    if members:
+        # both members above twice the noise, each beside the other: a pair the data can resolve
+        row["resolvable"] = bool(min(members.values()) > 2 * NOISE)
+    ad = doc.get("adequacy", {}).get("after_cv", {})
+    row["adequacy_r"], row["adequacy_p"] = ad.get("r", math.nan), ad.get("p", math.nan)
     row["false_names"] = "+".join(sorted(set(named) - hidden)) or ""
     for name, (gp, lp) in COMPARED.items():
         if name in case["effects"] and name in named:
@@ -173,6 +206,10 @@ def run_selftest(out: str | Path, seed: int = 7, workers: int = 2, cases: list[d
     return df
 
 
+def _flag(df: pd.DataFrame, col: str) -> pd.Series:
+    return df[col].fillna(False).astype(bool) if col in df else pd.Series(False, index=df.index)
+
+
 def summarize(df: pd.DataFrame) -> dict[str, Any]:
     big = df[(df.kind.isin(["single", "pair"])) & ((df["size"] > 2 * NOISE) | df.hidden.str.contains("obstruction"))]
     s: dict[str, Any] = {
@@ -184,7 +221,14 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "false_names_on_nulls": int((df[df.kind == "null"].named != "none").sum()),
         "pairs_both_named": int(df[df.kind == "pair"].correct.sum()),
         "n_pairs": int((df.kind == "pair").sum()),
+        # pairs whose members both change stiffness by more than twice the noise beside the other
+        "pairs_resolvable_both_named": int(df[(df.kind == "pair") & _flag(df, "resolvable")].correct.sum()),
+        "n_pairs_resolvable": int(((df.kind == "pair") & _flag(df, "resolvable")).sum()),
         "out_of_library_flagged_unexplained": int(df[df.kind == "out_of_library"].unexplained.sum()),
+        # the flag's cost: raised where nothing outside the library is hidden
+        "unexplained_on_nulls": int(df[df.kind == "null"].unexplained.sum()),
+        "unexplained_on_correctly_named": int(df[df.kind.isin(["single", "pair"]) & df.correct].unexplained.sum()),
+        "n_correctly_named": int((df.kind.isin(["single", "pair"]) & df.correct).sum()),
         "out_of_library_misnamed": int((df[df.kind == "out_of_library"].named != "none").sum()),
         "n_out_of_library": int((df.kind == "out_of_library").sum()),
     }

@@ -21,7 +21,12 @@
    step's alpha is split in halves between the single effects (Bonferroni)
    and the pair (one score test over every pair's joint directions).
    Repeated until nothing passes.
-5. The fitted model (95 % cane-bootstrap intervals) as a model file; the
+5. Adequacy (:func:`.structure.level_trend`): the held-out residual must not
+   trend with the model's own stiffness level between canes; the structure
+   table (:func:`.structure.structure_tests`) must show nothing significant.
+   Either failing sets ``unexplained``; the named effects stay named (the
+   best the library does), and the note says what remains.
+6. The fitted model (95 % cane-bootstrap intervals) as a model file; the
    baseline and the chosen backends re-run with it; before and after, out of
    sample.
 """
@@ -51,7 +56,7 @@ from .fit import Candidate, bootstrap_ci, cross_validate, direction_test_p, fit_
 from .onsets import detect_early_contact, detect_onset
 from .screen import trial_geometry
 from .screenset import ScreenSet, predict_log_k
-from .structure import between_share, structure_tests
+from .structure import between_share, level_trend, structure_tests
 
 BASELINES = {
     "beam": ("beam", "beam-consistent", "the converged geometrically exact beam (stated modulus, caliper-fit taper)"),
@@ -63,6 +68,14 @@ SCREENED = ("modulus_scale", "root_compliance", "rig_compliance", "base_flare", 
 ALPHA = 0.05  # family-wise per step: halves for the singles (Bonferroni) and the pair test
 MIN_OBSTRUCTED = 1  # trials with a detected onset needed to name the obstruction
 STRUCTURE_ALPHA = 0.01  # Bonferroni-adjusted p below which residual structure counts as unexplained
+#: level of the adequacy check (:func:`.structure.level_trend`: held-out residual against the model's
+#: held-out stiffness level, between canes), one pre-declared test beside the structure table's
+#: family. The model's level and the residual share the caliper-fit geometry's error (about 0.2 in
+#: ln between canes on the generator's canes), which biases r negative: on the self-test's 38
+#: in-library and null sets r averaged -0.16 (seed 7) and -0.25 (seed 8); p fell below 0.01 in
+#: 2 and 4 of them, so the level is nominal (README, Discovery). The flag names nothing; it
+#: warns that the model is incomplete.
+ADEQUACY_ALPHA = 0.01
 MIN_REDUCTION = 0.05  # held-out mean |log ratio| per cane must fall by at least this fraction
 #: an effect must change the fitted model's stiffness by at least this much (mean |d ln k| over the
 #: trials, after refitting the effects already named) to be named: materiality, not significance.
@@ -89,6 +102,8 @@ class DiscoveryResult:
     timing: dict[str, float] = field(default_factory=dict)
     #: engine runs the screen was re-anchored on after each named effect (see :func:`_reanchor`)
     anchors: list[dict[str, Any]] = field(default_factory=list)
+    #: the adequacy check before and after (:func:`.structure.level_trend`)
+    adequacy: dict[str, Any] = field(default_factory=dict)
 
     def to_df(self) -> pd.DataFrame:
         return self.trials
@@ -104,7 +119,8 @@ class DiscoveryResult:
             tr.append(row)
         return {"baseline": self.baseline, "named": self.named, "unexplained": bool(self.unexplained),
                 "gap": self.gap, "trials": tr, "stop_reason": self.stop_reason, "notes": self.notes,
-                "selection": self.steps.to_dict("records"), "anchors": self.anchors, "timing_s": self.timing,
+                "selection": self.steps.to_dict("records"), "anchors": self.anchors, "adequacy": self.adequacy,
+                "timing_s": self.timing,
                 "between_cane_share": {"before": between_share(self.trials, "r_before"),
                                        "after_cv": between_share(self.trials, "r_after_cv")}}
 
@@ -368,9 +384,15 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     r_after = final.residual
     F["r_before"] = r_before
     F["r_after_cv"] = r_after
-    F["r_after_in"] = lkf - predict_log_k(ss, lkb, final.fit.specs)
+    F["log_k_model"] = predict_log_k(ss, lkb, final.fit.specs)  # the fitted model's own stiffness
+    F["log_k_base"] = lkb0
+    F["r_after_in"] = lkf - F.log_k_model
     lka = lkb  # the engine at the last anchor
-    feats = feats.merge(F[["trial", "r_before", "r_after_cv", "r_after_in"]], on="trial", how="left")
+    # the held-out prediction: the level the held-out residual is compared with (both from the fold
+    # that left the cane out, so neither carries the cane's own measurement)
+    F["log_k_model_cv"] = lkf - r_after
+    feats = feats.merge(F[["trial", "r_before", "r_after_cv", "r_after_in", "log_k_model", "log_k_model_cv"]],
+                        on="trial", how="left")
 
     # -- intervals
     t4 = time.perf_counter()
@@ -395,7 +417,23 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     # -- structure before and after
     sb = structure_tests(F, "r_before", seed=seed)
     sa = structure_tests(F, "r_after_cv", seed=seed)
-    unexplained = bool(len(sa) and (sa.p_adj < STRUCTURE_ALPHA).any())
+    structured = bool(len(sa) and (sa.p_adj < STRUCTURE_ALPHA).any())
+    # adequacy: a model that fits the mean but not how stiffness scales across canes is incomplete,
+    # whatever it named. The structure table's Bonferroni family (13 tests) is too wide to see this
+    # one trend, and its stiffness-level feature is the field's, which contains the residual itself.
+    adequacy = {"test": "between-cane correlation of the held-out residual with the model's ln k "
+                        "(cane permutations, two-sided)", "alpha": ADEQUACY_ALPHA,
+                "before": level_trend(F, "r_before", "log_k_base", seed=seed),
+                "after_cv": level_trend(F, "r_after_cv", "log_k_model_cv", seed=seed)}
+    adequacy["inadequate"] = bool(adequacy["after_cv"]["p"] < ADEQUACY_ALPHA)
+    unexplained = structured or adequacy["inadequate"]
+    if adequacy["inadequate"]:
+        a = adequacy["after_cv"]
+        what = ", ".join(n["effect"] for n in named if n["scope"] == "global") or "the baseline"
+        notes.append(f"the model ({what}) does not scale across canes as the data do: the held-out residual "
+                     f"{'falls' if a['r'] < 0 else 'rises'} with the model's stiffness level between canes "
+                     f"(r = {a['r']:.2f}, p = {a['p']:.2g} < {ADEQUACY_ALPHA}); an effect outside the library, or "
+                     f"one the library has with the wrong scaling, remains")
     gap = {"before": _gap(r_before), "after_cv": _gap(r_after), "after_in_sample": _gap(F.r_after_in.to_numpy())}
     model = cfg0.replace(effects=tuple(final.fit.specs) + obstruction)
 
@@ -411,7 +449,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             "screen_vs_engine_max", "linear_screen_vs_engine_max")} for r in engines.itertuples()}
     timing["total_s"] = time.perf_counter() - t_start
     result = DiscoveryResult(baseline, named, unexplained, gap, feats, pd.DataFrame(steps), sb, sa, model, engines,
-                             stop, notes, timing, anchors)
+                             stop, notes, timing, anchors, adequacy)
     result.notes.append(f"baseline: {base_text}")
     if any(t.cane.provenance.get("assumptions") for t in trials):
         for a in dict.fromkeys(a for t in trials for a in t.cane.provenance.get("assumptions", [])):
