@@ -505,3 +505,36 @@ def test_direction_test_holds_its_level_on_nulls_and_sees_a_global_shift():
              ("probe_misalignment", "root_compliance")]
     ps = np.array([p_of(union, draw(0.0)) for _ in range(100)])
     assert np.sum(ps < 0.05) < 11, np.sort(ps)[:20]
+
+
+def test_a_pair_is_redrawn_until_both_members_are_resolvable(tmp_path, monkeypatch):
+    """The self-test's pairs: a member hidden behind the other is redrawn (seeded), and the truth
+    records the strengths used and how many draws it took. The generator is replaced by one whose
+    shares are known: the scale's is |ln scale|, the root's always 1."""
+    import json
+    import math
+
+    import canebench.canes.generate_hidden as gh
+    from canebench.discovery.selftest import NOISE, _generate_case, _member_sizes
+
+    def fake(folder, seed, effects):
+        share = abs(math.log(effects["modulus_scale"]["scale"]))
+        tr = {"k_effect_n_per_mm": 1.0, "k_without_modulus_scale_n_per_mm": math.exp(-share),
+              "k_without_root_compliance_n_per_mm": math.exp(-1.0)}
+        (folder / "truth").mkdir(parents=True)
+        (folder / "truth" / "truth.json").write_text(json.dumps({"effects": effects, "canes": {"c": {"trials": {"1": tr}}}}))
+        return folder
+
+    monkeypatch.setattr(gh, "generate_hidden", fake)
+    case = {"kind": "pair", "seed": 5, "effects": {"root_compliance": {"k_root": 4.0}, "modulus_scale": {"scale": 1.05}}}
+    runs = []
+    for i in range(2):
+        _generate_case(tmp_path / f"p{i}", case)
+        runs.append(json.loads((tmp_path / f"p{i}" / "truth" / "truth.json").read_text()))
+        assert min(_member_sizes(tmp_path / f"p{i}").values()) > 2 * NOISE
+    assert runs[0]["draws"] > 1 and runs[0]["effects"]["modulus_scale"]["scale"] != 1.05
+    assert runs[0] == runs[1]  # seeded: the same case gives the same dataset
+    # a single effect is never redrawn
+    one = {"kind": "single", "seed": 5, "effects": {"modulus_scale": {"scale": 1.05}}}
+    _generate_case(tmp_path / "s", one)
+    assert json.loads((tmp_path / "s" / "truth" / "truth.json").read_text())["effects"] == one["effects"]
