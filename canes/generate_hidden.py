@@ -136,9 +136,14 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
             if "modulus_scale" in effects:
                 E *= effects["modulus_scale"]["scale"]
             c_root = 1.0 / effects["root_compliance"]["k_root"] if "root_compliance" in effects else 0.0
-            spec = RodSpec(L, tangent, lambda s, E=E, d=dfun: E * np.pi * d(s) ** 4 / 64.0,
-                           lambda s, d=dfun: 580.0 * np.pi * d(s) ** 2 / 4.0, NU, np.zeros(3),
-                           np.array([0.0, 0.0, -9.81]), base_compliance=c_root)
+
+            def rod_spec(E_s: float, d_s, c_s: float = 0.0) -> RodSpec:
+                """The cane's rod with modulus ``E_s``, diameter law ``d_s`` and root compliance ``c_s``."""
+                return RodSpec(L, tangent, lambda s: E_s * np.pi * d_s(s) ** 4 / 64.0,
+                               lambda s: 580.0 * np.pi * d_s(s) ** 2 / 4.0, NU, np.zeros(3),
+                               np.array([0.0, 0.0, -9.81]), base_compliance=c_s)
+
+            spec = rod_spec(E, dfun, c_root)
             s_top = rng.uniform(0.55, 0.75) * L
             s_push = [s_top, s_top - rng.uniform(0.08, 0.14), 0.0]
             s_push[2] = s_push[1] - rng.uniform(0.08, 0.14)
@@ -212,9 +217,7 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                 pps.append({"id": str(t_no), "height": round(h, 3), "direction": [round(float(v), 6) for v in azim],
                             "trial": f"../{fname}"})
                 # the effects' size on this trial: small-deflection stiffness with and without them
-                plain = RodSpec(L, tangent, lambda s, E=E0, d=dplain: E * np.pi * d(s) ** 4 / 64.0,
-                                lambda s, d=dplain: 580.0 * np.pi * d(s) ** 2 / 4.0, NU, np.zeros(3),
-                                np.array([0.0, 0.0, -9.81]))
+                plain = rod_spec(E0, dplain)
                 u0 = probe_direction(azim, curve.tangent(sp), pitch - misalign)
                 k_plain = Rod(plain, sp, u0, ELEMENTS // 2).linear_stiffness()
                 k_eff = k_lin * mult
@@ -231,10 +234,7 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                         E_d = E0 * (effects["modulus_scale"]["scale"] if "modulus_scale" in effects
                                     and drop != "modulus_scale" else 1.0)
                         d_d = dplain if drop == "base_flare" else dfun
-                        spec_d = RodSpec(L, tangent, lambda s, E=E_d, d=d_d: E * np.pi * d(s) ** 4 / 64.0,
-                                         lambda s, d=d_d: 580.0 * np.pi * d(s) ** 2 / 4.0, NU, np.zeros(3),
-                                         np.array([0.0, 0.0, -9.81]),
-                                         base_compliance=0.0 if drop == "root_compliance" else c_root)
+                        spec_d = rod_spec(E_d, d_d, 0.0 if drop == "root_compliance" else c_root)
                         u_d = u0 if drop == "probe_misalignment" else u
                         m_d = 1.0 if drop == "lateral_support" else support(E_d, d_d, u_d)
                         k_d = Rod(spec_d, sp, u_d, ELEMENTS).linear_stiffness() * m_d

@@ -57,12 +57,16 @@ def suite(seed: int = 7, per_effect: int = 5, nulls: int = 5, pairs: int = 3, oo
     return out
 
 
+def _share(truth: dict[str, Any], without: str) -> float:
+    """Median over trials of |ln(k_effect / k_without)|: how much the hidden effects, or one of them, move k."""
+    vals = [abs(math.log(tr["k_effect_n_per_mm"] / tr[without]))
+            for c in truth["canes"].values() for tr in c["trials"].values() if without in tr]
+    return float(np.median(vals)) if vals else 0.0
+
+
 def _effect_size(folder: Path) -> float:
     """Median |ln(k_with / k_without)| of the small-deflection stiffness, from the truth."""
-    t = json.loads((folder / "truth" / "truth.json").read_text())
-    vals = [abs(math.log(tr["k_effect_n_per_mm"] / tr["k_plain_n_per_mm"]))
-            for c in t["canes"].values() for tr in c["trials"].values() if "k_effect_n_per_mm" in tr]
-    return float(np.median(vals)) if vals else 0.0
+    return _share(_read_json(folder / "truth" / "truth.json"), "k_plain_n_per_mm")
 
 
 def _suite_code(harness_code: str) -> str:
@@ -80,14 +84,9 @@ def _suite_code(harness_code: str) -> str:
 
 def _member_sizes(folder: Path) -> dict[str, float]:
     """Each hidden effect's own share where there are several: median |ln(k_all / k_without_it)|."""
-    t = json.loads((folder / "truth" / "truth.json").read_text())
-    trials = [tr for c in t["canes"].values() for tr in c["trials"].values()]
-    out = {}
-    for key in (trials[0] if trials else {}):
-        if key.startswith("k_without_"):
-            name = key[len("k_without_"):-len("_n_per_mm")]
-            out[name] = float(np.median([abs(math.log(tr["k_effect_n_per_mm"] / tr[key])) for tr in trials]))
-    return out
+    t = _read_json(folder / "truth" / "truth.json")
+    first = next((tr for c in t["canes"].values() for tr in c["trials"].values()), {})
+    return {k[len("k_without_"):-len("_n_per_mm")]: _share(t, k) for k in first if k.startswith("k_without_")}
 
 
 def _generate_case(folder: Path, case: dict[str, Any], max_draws: int = 24) -> None:
