@@ -538,3 +538,36 @@ def test_a_pair_is_redrawn_until_both_members_are_resolvable(tmp_path, monkeypat
     one = {"kind": "single", "seed": 5, "effects": {"modulus_scale": {"scale": 1.05}}}
     _generate_case(tmp_path / "s", one)
     assert json.loads((tmp_path / "s" / "truth" / "truth.json").read_text())["effects"] == one["effects"]
+
+
+def test_the_backward_pass_drops_a_stale_effect_and_keeps_a_material_one():
+    """Selection's backward pass (``_stalest``) on the bundled geometry: with a modulus scale and a
+    stiff root hidden (seed 7's self-test pair: 1.69, 131 N m/rad), a rig spring fitted beside them
+    refits to a stiffness that changes nothing and is the one dropped; with a real rig hidden too
+    (80 N/m, in series with canes of 10 to 300 N/m) no effect is stale."""
+    from types import SimpleNamespace
+
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.discovery.fit import Candidate, fit_candidate
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.workflow import MIN_CHANGE, _stalest
+    from canebench.model.effects import EffectSpec
+    from canebench.model.presets import PRESETS
+
+    cfg = PRESETS["beam-consistent"]
+    ss = ScreenSet.build([trial_geometry(t, cfg) for t in load_dataset(bundled_dataset())])
+    lkb = -np.log(ss.c0 * 1e3)  # the screen's own stiffness (N/mm) as the anchor
+    canes, inv = np.unique(ss.canes, return_inverse=True)
+    rng = np.random.default_rng(7)
+    scatter = rng.normal(0, 0.1, len(canes))[inv] + rng.normal(0, 0.02, len(lkb))
+    truth = (EffectSpec.parse("modulus_scale(scale=1.69)"), EffectSpec.parse("root_compliance(k_root=131)"))
+    names = ("modulus_scale", "rig_compliance", "root_compliance")
+    for hidden, stale in ((truth, True), (truth + (EffectSpec.parse("rig_compliance(k_rig=80)"),), False)):
+        lkf = predict_log_k(ss, lkb, hidden) + scatter
+        fit = fit_candidate(Candidate.of(names), ss, lkf, lkb)
+        drop = _stalest(names, SimpleNamespace(fit=fit), ss, lkf, lkb)
+        if stale:
+            assert drop["name"] == "rig_compliance" and drop["net"] < MIN_CHANGE, drop
+        else:
+            assert drop["net"] >= MIN_CHANGE, drop

@@ -20,7 +20,10 @@
    the best BIC is tested jointly: two effects can cancel to first order. Each
    step's alpha is split in halves between the single effects (Bonferroni)
    and the pair (one score test over every pair's joint directions).
-   Repeated until nothing passes.
+   Repeated until nothing passes. After each addition a backward pass drops
+   any named effect whose removal (the others refitted) changes the model by
+   less than :data:`MIN_CHANGE`: an effect named early can go stale once a
+   later one explains its share. A dropped effect is not screened again.
 5. Adequacy (:func:`.structure.level_trend`): the held-out residual must not
    trend with the model's own stiffness level between canes; the structure
    table (:func:`.structure.structure_tests`) must show nothing significant.
@@ -164,6 +167,18 @@ def _net_change(ss: ScreenSet, lk_anchor: np.ndarray, specs: tuple[EffectSpec, .
     return float(np.mean(d[np.isfinite(d)])) if np.isfinite(d).any() else 0.0
 
 
+def _stalest(current: tuple[str, ...], cv_cur: Any, ss: ScreenSet, lkf: np.ndarray,
+             lkb: np.ndarray) -> dict[str, Any]:
+    """The named effect whose removal (the others refitted) changes the model least."""
+    best: dict[str, Any] = {}
+    for name in current:
+        fit = fit_candidate(Candidate.of(tuple(c for c in current if c != name)), ss, lkf, lkb)
+        net = _net_change(ss, lkb, fit.specs, cv_cur.fit.specs)
+        if not best or net < best["net"]:
+            best = {"name": name, "net": net, "fit": fit}
+    return best
+
+
 def _ok_log_k(res: pd.DataFrame, backend: str, order: pd.Series) -> np.ndarray:
     """ln k_sim of ``backend``'s ok results, in the trial order ``order`` (NaN where not ok)."""
     r = res[res.backend == backend].set_index("trial")
@@ -290,6 +305,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     t3 = time.perf_counter()
     lkb0, ss0 = lkb, ss  # the baseline engine's answer (the "before") and its screen; lkb, ss follow the anchor
     current: tuple[str, ...] = ()
+    removed: list[str] = []  # named, then found stale by the backward pass
     cv_cur = cross_validate(Candidate.of(()), ss, lkf, lkb)
     steps = []
     anchors: list[dict[str, Any]] = []
@@ -329,9 +345,11 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         return {"add": add, "cv": cv, "gain": gain, "p": p, "net": net, "passed": passed, "row": row}
 
     while True:
-        remaining = [c for c in candidates if c not in current]
+        remaining = [c for c in candidates if c not in current and c not in removed]
         if not remaining or len(current) >= max_effects:
-            stop = "every candidate is in the model" if not remaining else f"at most {max_effects} effects"
+            stop = (("every candidate is in the model" + (f" or was dropped as stale ({', '.join(removed)})"
+                                                          if removed else ""))
+                    if not remaining else f"at most {max_effects} effects")
             break
         l1_cur = _l1_by_cane(cv_cur.residual, ss.canes)
         # the step's family-wise alpha: split in halves between the single effects and the pair
@@ -370,6 +388,23 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             cv_cur = best["cv"]
             ss, lkb, cv_cur = _reanchor(trials, F, ss, lkb, cv_cur, lkf, base_backend, proto, cfg0, obstruction,
                                         outp, executor, progress, anchors, len(current))
+            # backward pass: an effect named early can go stale once a later one takes over its
+            # share (a stiff rig named before the soft root that explains the same stiff canes
+            # refits to a rig so stiff it changes nothing); the materiality rule that named it
+            # removes it. A removed effect is not screened again, so selection terminates.
+            while len(current) >= 2:
+                drop = _stalest(current, cv_cur, ss, lkf, lkb)
+                if drop["net"] >= min_change:
+                    break
+                steps.append({"step": len(current), "model": "+".join(current), "candidate": f"-{drop['name']}",
+                              "net_change_mean_abs": drop["net"], "bic": drop["fit"].bic,
+                              "params": {s.name: dict(s.params) for s in cv_cur.fit.specs},
+                              "chosen": True, "removed": drop["name"]})
+                current = tuple(c for c in current if c != drop["name"])
+                removed.append(drop["name"])
+                cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb)
+                ss, lkb, cv_cur = _reanchor(trials, F, ss, lkb, cv_cur, lkf, base_backend, proto, cfg0,
+                                            obstruction, outp, executor, progress, anchors, len(current))
             continue
         red = best["gain"] / float(l1_cur.mean()) if l1_cur.mean() > 0 else 0.0
         stop = (f"no candidate passes (best by held-out gain: {'+'.join(best['add'])}, {best['gain']:.3g} in mean "
