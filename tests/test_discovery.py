@@ -540,18 +540,20 @@ def test_a_pair_is_redrawn_until_both_members_are_resolvable(tmp_path, monkeypat
     assert json.loads((tmp_path / "s" / "truth" / "truth.json").read_text())["effects"] == one["effects"]
 
 
-def test_the_backward_pass_drops_a_stale_effect_and_keeps_a_material_one():
-    """Selection's backward pass (``_stalest``) on the bundled geometry: with a modulus scale and a
-    stiff root hidden (seed 7's self-test pair: 1.69, 131 N m/rad), a rig spring fitted beside them
-    refits to a stiffness that changes nothing and is the one dropped; with a real rig hidden too
-    (80 N/m, in series with canes of 10 to 300 N/m) no effect is stale."""
+def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones():
+    """Selection's backward pass (``_backward``) on the bundled geometry, the engine re-anchoring
+    replaced by a stand-in that records its calls. With a modulus scale and a stiff root hidden
+    (seed 7's self-test pair: 1.69, 131 N m/rad) and a rig spring fitted beside them, the rig
+    refits to a stiffness that changes nothing: it is dropped, the rest re-anchored once, the
+    drop recorded. With a real rig hidden too (80 N/m, in series with canes of 10 to 300 N/m)
+    nothing is dropped; nor is the stale rig when it is the effect just added."""
     from types import SimpleNamespace
 
     from canebench.data.dataset import bundled_dataset, load_dataset
     from canebench.discovery.fit import Candidate, fit_candidate
     from canebench.discovery.screen import trial_geometry
     from canebench.discovery.screenset import ScreenSet, predict_log_k
-    from canebench.discovery.workflow import MIN_CHANGE, _stalest
+    from canebench.discovery.workflow import MIN_CHANGE, _backward, _stalest
     from canebench.model.effects import EffectSpec
     from canebench.model.presets import PRESETS
 
@@ -563,11 +565,34 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_a_material_one():
     scatter = rng.normal(0, 0.1, len(canes))[inv] + rng.normal(0, 0.02, len(lkb))
     truth = (EffectSpec.parse("modulus_scale(scale=1.69)"), EffectSpec.parse("root_compliance(k_root=131)"))
     names = ("modulus_scale", "rig_compliance", "root_compliance")
-    for hidden, stale in ((truth, True), (truth + (EffectSpec.parse("rig_compliance(k_rig=80)"),), False)):
+    calls = []
+
+    def reanchor(ss_, lkb_, cv_):
+        calls.append(tuple(s.name for s in cv_.fit.specs))
+        return ss_, lkb_, cv_
+
+    def run(hidden, protect):
         lkf = predict_log_k(ss, lkb, hidden) + scatter
-        fit = fit_candidate(Candidate.of(names), ss, lkf, lkb)
-        drop = _stalest(names, SimpleNamespace(fit=fit), ss, lkf, lkb)
-        if stale:
-            assert drop["name"] == "rig_compliance" and drop["net"] < MIN_CHANGE, drop
-        else:
-            assert drop["net"] >= MIN_CHANGE, drop
+        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), ss, lkf, lkb))
+        calls.clear()
+        steps = []
+        out = _backward(names, protect, cv, ss, lkf, lkb, MIN_CHANGE, reanchor, steps, 3)
+        return out, steps, lkf, cv
+
+    (current, cv, _, _, dropped), steps, lkf, _ = run(truth, ("root_compliance",))
+    assert current == ("modulus_scale", "root_compliance") and dropped == ["rig_compliance"]
+    assert calls == [("modulus_scale", "root_compliance")] and [s.name for s in cv.fit.specs] == list(current)
+    assert steps[0]["removed"] == "rig_compliance" and steps[0]["net_change_mean_abs"] < MIN_CHANGE
+    # the refitted scale and root are the truth's (the scatter's mean aside)
+    got = {s.name: dict(s.params) for s in cv.fit.specs}
+    assert got["root_compliance"]["k_root"] == pytest.approx(131, rel=0.1), got
+    # the stale rig just added is not the backward pass's to drop (it passed against this model)
+    (current, *_), steps, _, _ = run(truth, ("rig_compliance",))
+    assert current == names and steps == [] and calls == []
+    # a material rig: nothing goes; the stalest candidate (the scale, the rig just added being
+    # protected) changes the model well past MIN_CHANGE
+    (current, *_), steps, lkf, cv0 = run(truth + (EffectSpec.parse("rig_compliance(k_rig=80)"),),
+                                         ("root_compliance",))
+    assert current == names and steps == [] and calls == []
+    nearest = _stalest(names, ("modulus_scale", "rig_compliance"), cv0, ss, lkf, lkb)
+    assert nearest["net"] > 2 * MIN_CHANGE, nearest

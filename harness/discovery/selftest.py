@@ -173,6 +173,8 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     ad = doc.get("adequacy", {}).get("after_cv", {})
     row["adequacy_r"], row["adequacy_p"] = ad.get("r", math.nan), ad.get("p", math.nan)
     row["false_names"] = "+".join(sorted(set(named) - hidden)) or ""
+    # effects named and then dropped as stale by selection's backward pass
+    row["dropped"] = "+".join(r["removed"] for r in doc["selection"] if r.get("removed")) or ""
     if case["kind"] == "pair":
         row["draws"] = int(truth.get("draws", 1))
         row["effects"] = json.dumps(effects)

@@ -20,10 +20,11 @@
    the best BIC is tested jointly: two effects can cancel to first order. Each
    step's alpha is split in halves between the single effects (Bonferroni)
    and the pair (one score test over every pair's joint directions).
-   Repeated until nothing passes. After each addition a backward pass drops
-   any named effect whose removal (the others refitted) changes the model by
-   less than :data:`MIN_CHANGE`: an effect named early can go stale once a
-   later one explains its share. A dropped effect is not screened again.
+   Repeated until nothing passes. After each addition a backward pass
+   (:func:`_backward`) drops any earlier effect whose removal (the others
+   refitted) changes the model by less than :data:`MIN_CHANGE`: an effect
+   named early can go stale once a later one explains its share. No forward
+   step returns to a model already held, so the search terminates.
 5. Adequacy (:func:`.structure.level_trend`): the held-out residual must not
    trend with the model's own stiffness level between canes; the structure
    table (:func:`.structure.structure_tests`) must show nothing significant.
@@ -122,7 +123,8 @@ class DiscoveryResult:
             tr.append(row)
         return {"baseline": self.baseline, "named": self.named, "unexplained": bool(self.unexplained),
                 "gap": self.gap, "trials": tr, "stop_reason": self.stop_reason, "notes": self.notes,
-                "selection": self.steps.to_dict("records"), "anchors": self.anchors, "adequacy": self.adequacy,
+                # NaN (a column a row does not have) as null: strict JSON
+                "selection": self.steps.astype(object).where(self.steps.notna(), None).to_dict("records"), "anchors": self.anchors, "adequacy": self.adequacy,
                 "timing_s": self.timing,
                 "between_cane_share": {"before": between_share(self.trials, "r_before"),
                                        "after_cv": between_share(self.trials, "r_after_cv")}}
@@ -167,16 +169,48 @@ def _net_change(ss: ScreenSet, lk_anchor: np.ndarray, specs: tuple[EffectSpec, .
     return float(np.mean(d[np.isfinite(d)])) if np.isfinite(d).any() else 0.0
 
 
-def _stalest(current: tuple[str, ...], cv_cur: Any, ss: ScreenSet, lkf: np.ndarray,
+def _stalest(current: tuple[str, ...], eligible: tuple[str, ...], cv_cur: Any, ss: ScreenSet, lkf: np.ndarray,
              lkb: np.ndarray) -> dict[str, Any]:
-    """The named effect whose removal (the others refitted) changes the model least."""
+    """The effect in ``eligible`` whose removal from ``current`` (the others refitted) changes the model least."""
     best: dict[str, Any] = {}
-    for name in current:
+    for name in eligible:
         fit = fit_candidate(Candidate.of(tuple(c for c in current if c != name)), ss, lkf, lkb)
         net = _net_change(ss, lkb, fit.specs, cv_cur.fit.specs)
         if not best or net < best["net"]:
             best = {"name": name, "net": net, "fit": fit}
     return best
+
+
+def _backward(current: tuple[str, ...], protect: tuple[str, ...], cv_cur: Any, ss: ScreenSet, lkf: np.ndarray,
+              lkb: np.ndarray, min_change: float, reanchor: Any, steps: list[dict[str, Any]],
+              step: int) -> tuple[tuple[str, ...], Any, ScreenSet, np.ndarray, list[str]]:
+    """Drop the named effects that have gone stale; return (current, cv_cur, ss, lkb, dropped).
+
+    An effect named early can go stale once a later one explains its share (a stiff rig named
+    before the soft root that explains the same stiff canes refits to a rig so stiff it changes
+    nothing). While the stalest effect's removal, the others refitted, changes the model by less
+    than ``min_change`` (the materiality rule that named it), it is dropped, the rest
+    cross-validated and ``reanchor(ss, lkb, cv_cur)`` run. The effects just added (``protect``)
+    are not candidates: they passed that rule against this very model, and a pair member
+    dropped at once would leave its partner, which failed alone, in the model untested.
+    """
+    dropped: list[str] = []
+    while True:
+        eligible = tuple(c for c in current if c not in protect)
+        if not eligible:
+            break
+        drop = _stalest(current, eligible, cv_cur, ss, lkf, lkb)
+        if drop["net"] >= min_change:
+            break
+        current = tuple(c for c in current if c != drop["name"])
+        steps.append({"step": step, "model": "+".join(current), "candidate": f"-{drop['name']}",
+                      "net_change_mean_abs": drop["net"], "bic": drop["fit"].bic, "bic_before": cv_cur.fit.bic,
+                      "params": {s.name: dict(s.params) for s in drop["fit"].specs}, "chosen": True,
+                      "removed": drop["name"]})
+        dropped.append(drop["name"])
+        cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb)
+        ss, lkb, cv_cur = reanchor(ss, lkb, cv_cur)
+    return current, cv_cur, ss, lkb, dropped
 
 
 def _ok_log_k(res: pd.DataFrame, backend: str, order: pd.Series) -> np.ndarray:
@@ -306,6 +340,16 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     lkb0, ss0 = lkb, ss  # the baseline engine's answer (the "before") and its screen; lkb, ss follow the anchor
     current: tuple[str, ...] = ()
     removed: list[str] = []  # named, then found stale by the backward pass
+    # models the search has held: a forward step may not return to one, so an effect dropped as
+    # stale can re-enter only beside a new partner, and the search terminates
+    visited: set[frozenset[str]] = {frozenset()}
+    rounds = 0  # engine re-anchoring rounds (each its own folder)
+
+    def reanchor(ss_, lkb_, cv_):
+        nonlocal rounds
+        rounds += 1
+        return _reanchor(trials, F, ss_, lkb_, cv_, lkf, base_backend, proto, cfg0, obstruction, outp, executor,
+                         progress, anchors, len(cv_.fit.specs), rounds)
     cv_cur = cross_validate(Candidate.of(()), ss, lkf, lkb)
     steps = []
     anchors: list[dict[str, Any]] = []
@@ -345,16 +389,20 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         return {"add": add, "cv": cv, "gain": gain, "p": p, "net": net, "passed": passed, "row": row}
 
     while True:
-        remaining = [c for c in candidates if c not in current and c not in removed]
+        remaining = [c for c in candidates if c not in current and frozenset(current + (c,)) not in visited]
         if not remaining or len(current) >= max_effects:
-            stop = (("every candidate is in the model" + (f" or was dropped as stale ({', '.join(removed)})"
+            stop = (("every candidate is in the model" + (" or leads back to a model already held"
                                                           if removed else ""))
                     if not remaining else f"at most {max_effects} effects")
             break
         l1_cur = _l1_by_cane(cv_cur.residual, ss.canes)
         # the step's family-wise alpha: split in halves between the single effects and the pair
         # fallback when a pair can still be added, then Bonferroni within each half
-        pairs_possible = len(remaining) >= 2 and len(current) + 2 <= max_effects
+        # (a pair may hold an effect dropped as stale beside a new partner)
+        pool = [c for c in candidates if c not in current]
+        pairs = ([pr for pr in itertools.combinations(pool, 2) if frozenset(current + pr) not in visited]
+                 if len(current) + 2 <= max_effects else [])
+        pairs_possible = bool(pairs)
         share = 0.5 if pairs_possible else 1.0
         level = share * alpha / len(remaining)
         tried = [evaluate((c,), level, l1_cur) for c in remaining]
@@ -364,16 +412,16 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             # that a flared base stiffens) show up only together: when no single effect passes,
             # the pair with the best in-sample BIC is tried at level alpha / 2; its score test is the
             # max over every pair's joint directions (one test, whichever pair the BIC picked)
-            pairs = list(itertools.combinations(remaining, 2))
             fits = [fit_candidate(Candidate.of(current + pr), ss, lkf, lkb) for pr in pairs]
             i = int(np.argmin([f.bic for f in fits]))
             best_pair = pairs[i]
             if fits[i].bic < min(t["cv"].fit.bic for t in tried):
                 tp = evaluate(best_pair, 0.5 * alpha, l1_cur, test=pairs, full=fits[i])
                 # no passenger: each member must matter beside the other (BIC and materiality)
-                single = {t["add"][0]: t for t in tried}
+                single = {t["add"][0]: t["cv"].fit for t in tried}
                 for m in best_pair:
-                    other = single[next(n for n in best_pair if n != m)]["cv"].fit
+                    o = next(n for n in best_pair if n != m)
+                    other = single[o] if o in single else fit_candidate(Candidate.of(current + (o,)), ss, lkf, lkb)
                     if not (tp["cv"].fit.bic < other.bic
                             and _net_change(ss, lkb, tp["cv"].fit.specs, other.specs) >= min_change):
                         tp["passed"] = False
@@ -385,32 +433,19 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         steps.extend(t["row"] for t in tried)
         if ok:
             current = current + best["add"]
+            visited.add(frozenset(current))
             cv_cur = best["cv"]
-            ss, lkb, cv_cur = _reanchor(trials, F, ss, lkb, cv_cur, lkf, base_backend, proto, cfg0, obstruction,
-                                        outp, executor, progress, anchors, len(current))
-            # backward pass: an effect named early can go stale once a later one takes over its
-            # share (a stiff rig named before the soft root that explains the same stiff canes
-            # refits to a rig so stiff it changes nothing); the materiality rule that named it
-            # removes it. A removed effect is not screened again, so selection terminates.
-            while len(current) >= 2:
-                drop = _stalest(current, cv_cur, ss, lkf, lkb)
-                if drop["net"] >= min_change:
-                    break
-                steps.append({"step": len(current), "model": "+".join(current), "candidate": f"-{drop['name']}",
-                              "net_change_mean_abs": drop["net"], "bic": drop["fit"].bic,
-                              "params": {s.name: dict(s.params) for s in cv_cur.fit.specs},
-                              "chosen": True, "removed": drop["name"]})
-                current = tuple(c for c in current if c != drop["name"])
-                removed.append(drop["name"])
-                cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb)
-                ss, lkb, cv_cur = _reanchor(trials, F, ss, lkb, cv_cur, lkf, base_backend, proto, cfg0,
-                                            obstruction, outp, executor, progress, anchors, len(current))
+            ss, lkb, cv_cur = reanchor(ss, lkb, cv_cur)
+            current, cv_cur, ss, lkb, dropped = _backward(current, best["add"], cv_cur, ss, lkf, lkb, min_change,
+                                                          reanchor, steps, len(current))
+            removed.extend(dropped)
             continue
         red = best["gain"] / float(l1_cur.mean()) if l1_cur.mean() > 0 else 0.0
         stop = (f"no candidate passes (best by held-out gain: {'+'.join(best['add'])}, {best['gain']:.3g} in mean "
                 f"|ln| per cane ({100 * red:+.0f} %), score test p = {best['p']:.3g} against {best['row']['level']:.3g}, "
                 f"changes the model by {best['net']:.3g} in mean |ln k| against {min_change:.3g}"
-                f"{'; BIC does not improve' if best['cv'].fit.bic >= cv_cur.fit.bic else ''})")
+                f"{'; BIC does not improve' if best['cv'].fit.bic >= cv_cur.fit.bic else ''})"
+                + (f"; dropped as stale on the way: {', '.join(removed)}" if removed else ""))
         break
     timing["selection_s"] = time.perf_counter() - t3
 
@@ -496,7 +531,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
 
 
 def _reanchor(trials, F, ss, lka, cv_cur, lkf, backend, proto, cfg0, obstruction, outp, executor, progress,
-              log: list[dict[str, Any]], step: int, max_runs: int = 3, xtol: float = 0.005):
+              log: list[dict[str, Any]], step: int, round_no: int, max_runs: int = 3, xtol: float = 0.005):
     """Run the baseline engine with the current model and make it the screen's anchor; refit.
 
     Repeated (at most ``max_runs`` engine runs) until the refit changes the predicted ln k of
@@ -511,14 +546,14 @@ def _reanchor(trials, F, ss, lka, cv_cur, lkf, backend, proto, cfg0, obstruction
     for it in range(1, max_runs + 1):
         specs = tuple(cv_cur.fit.specs)
         cfg = cfg0.replace(effects=specs + obstruction)
-        res = run_trials(sub, [backend], proto, cfg, outp / f"anchor_{step}_{it}" if outp else None,
+        res = run_trials(sub, [backend], proto, cfg, outp / f"anchor_{round_no}_{it}" if outp else None,
                          executor=executor, progress=progress).to_df()
         lk_eng = _ok_log_k(res, backend, F.trial)
         lk_lin = predict_log_k(ss, lka, specs)
         good = np.isfinite(lk_eng)
         dev = lk_eng - lk_lin
         new_lka = np.where(good, lk_eng, lk_lin)
-        entry = {"step": step, "run": it, "params": {sp.name: dict(sp.params) for sp in specs},
+        entry = {"step": step, "round": round_no, "run": it, "params": {sp.name: dict(sp.params) for sp in specs},
                  "engine": backend, "n_failed": int((~good).sum()),
                  "engine_minus_screen_median": float(np.median(dev[good])) if good.any() else math.nan,
                  "engine_minus_screen_max_abs": float(np.max(np.abs(dev[good]))) if good.any() else math.nan}
