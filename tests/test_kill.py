@@ -30,8 +30,16 @@ def done_jobs(out: Path) -> int:
         return 0
 
 
+def _sigint_default() -> None:
+    # a shell starts background commands with SIGINT ignored, and Python then installs no
+    # KeyboardInterrupt handler: a run under `.ci/run &` would ignore the test's SIGINT.
+    # Give the child the terminal's default, as a user pressing Ctrl-C has.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start_and_wait(out: Path, at_least: int) -> tuple[subprocess.Popen, list[psutil.Process]]:
-    p = subprocess.Popen([*CMD, "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen([*CMD, "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=_sigint_default)
     deadline = time.monotonic() + 120
     while done_jobs(out) < at_least:
         assert p.poll() is None, p.communicate()
@@ -113,7 +121,8 @@ def test_busy_workers_do_not_outlive_the_parent(tmp_path, how):
     # only the parent's cancel (SIGINT) or the lifeline (SIGKILL) can stop it
     p = subprocess.Popen([sys.executable, "-m", "canebench", "run", "--backends", "pinocchio", "--trials",
                           "b1c1t1,b1c1t2", "--set", "segments=100000", "--jobs", "2", "--no-report", "--quiet",
-                          "--out", str(tmp_path / "run")], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                          "--out", str(tmp_path / "run")], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         preexec_fn=_sigint_default)
     deadline = time.monotonic() + 60
     kids: list[psutil.Process] = []
     while time.monotonic() < deadline:
