@@ -124,8 +124,8 @@ class DiscoveryResult:
         return {"baseline": self.baseline, "named": self.named, "unexplained": bool(self.unexplained),
                 "gap": self.gap, "trials": tr, "stop_reason": self.stop_reason, "notes": self.notes,
                 # NaN (a column a row does not have) as null: strict JSON
-                "selection": self.steps.astype(object).where(self.steps.notna(), None).to_dict("records"), "anchors": self.anchors, "adequacy": self.adequacy,
-                "timing_s": self.timing,
+                "selection": self.steps.astype(object).where(self.steps.notna(), None).to_dict("records"),
+                "anchors": self.anchors, "adequacy": self.adequacy, "timing_s": self.timing,
                 "between_cane_share": {"before": between_share(self.trials, "r_before"),
                                        "after_cv": between_share(self.trials, "r_after_cv")}}
 
@@ -208,7 +208,7 @@ def _backward(current: tuple[str, ...], protect: tuple[str, ...], cv_cur: Any, s
                       "params": {s.name: dict(s.params) for s in drop["fit"].specs}, "chosen": True,
                       "removed": drop["name"]})
         dropped.append(drop["name"])
-        cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb)
+        cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb, full=drop["fit"])  # that fit is at hand
         ss, lkb, cv_cur = reanchor(ss, lkb, cv_cur)
     return current, cv_cur, ss, lkb, dropped
 
@@ -343,17 +343,15 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     # models the search has held: a forward step may not return to one, so an effect dropped as
     # stale can re-enter only beside a new partner, and the search terminates
     visited: set[frozenset[str]] = {frozenset()}
-    rounds = 0  # engine re-anchoring rounds (each its own folder)
-
-    def reanchor(ss_, lkb_, cv_):
-        nonlocal rounds
-        rounds += 1
-        return _reanchor(trials, F, ss_, lkb_, cv_, lkf, base_backend, proto, cfg0, obstruction, outp, executor,
-                         progress, anchors, len(cv_.fit.specs), rounds)
     cv_cur = cross_validate(Candidate.of(()), ss, lkf, lkb)
     steps = []
     anchors: list[dict[str, Any]] = []
     stop = ""
+
+    def reanchor(ss_, lkb_, cv_):
+        # each engine re-anchoring round gets its own folder: a drop can return to an earlier size
+        return _reanchor(trials, F, ss_, lkb_, cv_, lkf, base_backend, proto, cfg0, obstruction, outp, executor,
+                         progress, anchors, len(cv_.fit.specs), len({a["round"] for a in anchors}) + 1)
 
     def evaluate(add: tuple[str, ...], level: float, l1_cur: np.ndarray, test: Any = None,
                  full: Any = None) -> dict[str, Any]:
@@ -389,7 +387,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         return {"add": add, "cv": cv, "gain": gain, "p": p, "net": net, "passed": passed, "row": row}
 
     while True:
-        remaining = [c for c in candidates if c not in current and frozenset(current + (c,)) not in visited]
+        pool = [c for c in candidates if c not in current]
+        remaining = [c for c in pool if frozenset(current + (c,)) not in visited]
         if not remaining or len(current) >= max_effects:
             stop = (("every candidate is in the model" + (" or leads back to a model already held"
                                                           if removed else ""))
@@ -399,7 +398,6 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         # the step's family-wise alpha: split in halves between the single effects and the pair
         # fallback when a pair can still be added, then Bonferroni within each half
         # (a pair may hold an effect dropped as stale beside a new partner)
-        pool = [c for c in candidates if c not in current]
         pairs = ([pr for pr in itertools.combinations(pool, 2) if frozenset(current + pr) not in visited]
                  if len(current) + 2 <= max_effects else [])
         pairs_possible = bool(pairs)
