@@ -596,3 +596,70 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
     assert current == names and steps == [] and calls == []
     nearest = _stalest(names, ("modulus_scale", "rig_compliance"), cv0, ss, lkf, lkb)
     assert nearest["net"] > 2 * MIN_CHANGE, nearest
+
+
+def test_caliper_scatter_is_pooled_over_canes_with_more_calipers_than_a_line_needs():
+    """Each cane's line has two parameters: three calipers give one degree of freedom, two give
+    none (skipped), and a dataset with none anywhere falls back to the documented default."""
+    from types import SimpleNamespace
+
+    from canebench.discovery.screenset import CALIPER_SIGMA_DEFAULT_M, CALIPER_SIGMA_FLOOR_M, caliper_sigma
+
+    def geom(cane, s, resid_mm):
+        line = 0.01 - 0.005 * np.asarray(s)
+        return SimpleNamespace(cane=cane, cal_s=np.asarray(s, float), cal_line=line,
+                               cal_d=line + 1e-3 * np.asarray(resid_mm, float))
+
+    a = geom("a", [0.5, 0.6, 0.7], [0.1, -0.2, 0.1])  # sum of squares 0.06 mm^2, 1 dof
+    b = geom("b", [0.4, 0.5, 0.6, 0.7], [0.3, -0.3, -0.3, 0.3])  # 0.36 mm^2, 2 dof
+    two = geom("c", [0.5, 0.7], [5.0, -5.0])  # no dof: its (impossible) residuals are not used
+    # a cane's calipers count once however many of its trials are in the list
+    got = caliper_sigma([a, a, a, b, two, b])
+    assert got == pytest.approx(1e-3 * math.sqrt((0.06 + 0.36) / 3), rel=1e-12)
+    assert caliper_sigma([two]) == CALIPER_SIGMA_DEFAULT_M
+    assert caliper_sigma([geom("d", [0.5, 0.6, 0.7], [0, 0, 0])]) == CALIPER_SIGMA_FLOOR_M
+
+
+def test_a_flare_must_read_what_the_calipers_read(bundled_trials):
+    """The calipers are data too. A long, thin flare hidden in the stiffness alone (the calipers
+    read the plain line, as a neighbour's support or a soft-cane bias would leave them) is what
+    the fit takes without the caliper term; with it, the fitted flare's change at every caliper
+    stays within 3 scatters (what 54 readings allow), and the term counts each cane once
+    in every fold and resample."""
+    from canebench.discovery.fit import Candidate, _take, fit_candidate
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.model.effects import AppliedEffects, EffectSpec
+    from canebench.model.presets import PRESETS
+
+    cfg = PRESETS["beam-consistent"]
+    ss = ScreenSet.build([trial_geometry(t, cfg) for t in bundled_trials])
+    assert len(ss.cal_s) == 3 * len(ss.trials) and 0 < ss.cal_sigma < 1e-3
+    lkb = -np.log(ss.c0 * 1e3)
+    long_thin = EffectSpec.parse("base_flare(excess_mm=6, length_mm=600)")
+    fx = AppliedEffects([long_thin.instance()])
+    at_cal = fx.diameter(ss.cal_s, ss.cal_line) - ss.cal_line
+    assert at_cal.min() > 3 * ss.cal_sigma  # the calipers would have seen it
+    canes, inv = np.unique(ss.canes, return_inverse=True)
+    lkf = predict_log_k(ss, lkb, (long_thin,)) + np.random.default_rng(3).normal(0, 0.05, len(canes))[inv]
+    plain = ScreenSet(**{**ss.__dict__, "cal_idx": ss.cal_idx[:0], "cal_s": ss.cal_s[:0],
+                         "cal_line": ss.cal_line[:0], "cal_w": ss.cal_w[:0]})
+
+    def change_at_calipers(fit):
+        f = AppliedEffects([s.instance() for s in fit.specs])
+        return np.abs(f.diameter(ss.cal_s, ss.cal_line) - ss.cal_line).max()
+
+    free = fit_candidate(Candidate.of(("base_flare",)), plain, lkf, lkb)
+    held = fit_candidate(Candidate.of(("base_flare",)), ss, lkf, lkb)
+    assert change_at_calipers(free) > 3 * ss.cal_sigma
+    assert change_at_calipers(held) < 3 * ss.cal_sigma
+    # the term: 0.5 sum over canes of (change / scatter)^2, one cane at a time
+    term = ss.caliper_nll(fx)
+    by_cane = sum(0.5 * np.sum((at_cal[ss.canes[ss.cal_idx] == c] / ss.cal_sigma) ** 2) / 3 for c in canes)
+    assert term == pytest.approx(by_cane, rel=1e-12)
+    one = ss.canes == canes[0]
+    assert ss.subset(one).caliper_nll(fx) + ss.subset(~one).caliper_nll(fx) == pytest.approx(term, rel=1e-12)
+    rows = np.flatnonzero(one)
+    twice = _take(ss, np.concatenate([rows, rows]), np.array(["x"] * len(rows) + ["y"] * len(rows)))
+    assert twice.caliper_nll(fx) == pytest.approx(2 * ss.subset(one).caliper_nll(fx), rel=1e-12)
+    assert ss.caliper_nll(AppliedEffects([EffectSpec.parse("root_compliance(k_root=20)").instance()])) == 0.0

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
-from ..model.effects import EFFECTS, EffectSpec
+from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
 from .screenset import ScreenSet, predict_log_k
 
 SIGMA_FLOOR = 0.01  # ln units: below the field slope's own standard error on any trial
@@ -132,11 +132,13 @@ def fit_candidate(cand: Candidate, ss: ScreenSet, log_k_field: np.ndarray, log_k
     groups = ss.canes
 
     def obj(x: np.ndarray) -> float:
-        lp = predict_log_k(ss, log_k_base, fixed + cand.specs(x))
+        specs = fixed + cand.specs(x)
+        lp = predict_log_k(ss, log_k_base, specs)
         r = log_k_field - lp
         if not np.all(np.isfinite(r)):
             return 1e12
-        return nll(r, groups)
+        # the calipers are data too: a diameter effect may not contradict their readings
+        return nll(r, groups) + ss.caliper_nll(AppliedEffects([s.instance() for s in specs]))
 
     if not cand.free:
         v = obj(np.zeros(0))
@@ -353,6 +355,10 @@ def _take(ss: ScreenSet, rows: np.ndarray, labels: np.ndarray) -> ScreenSet:
     parts = [np.flatnonzero(ss.idx == i) for i in rows]
     pts = np.concatenate(parts)
     idx = np.concatenate([np.full(len(p), k) for k, p in enumerate(parts)])
+    cparts = [np.flatnonzero(ss.cal_idx == i) for i in rows]
+    cpts = np.concatenate(cparts) if cparts else np.zeros(0, int)
+    cidx = np.concatenate([np.full(len(p), k) for k, p in enumerate(cparts)]) if cparts else np.zeros(0, int)
     return ScreenSet([ss.trials[i] for i in rows], np.asarray(labels), idx, ss.s[pts], ss.w[pts], ss.d0[pts],
                      ss.kaa[pts], ss.kae[pts], ss.kee[pts], ss.raa[rows], ss.rae[rows], ss.ree[rows], ss.E[rows],
-                     ss.th0[rows], ss.min_d, ss.c0[rows], ss.s0, ss.anchor)
+                     ss.th0[rows], ss.min_d, ss.c0[rows], ss.s0, ss.anchor, cidx.astype(int), ss.cal_s[cpts],
+                     ss.cal_line[cpts], ss.cal_w[cpts], ss.cal_sigma)

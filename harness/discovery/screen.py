@@ -27,7 +27,7 @@ k_base is that run's stiffness and the formula becomes
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -67,6 +67,11 @@ class TrialGeometry:
     base_pitch_deg: float
     s_push: float
     height: float
+    #: the cane's calipers: arc lengths and readings (m), times the diameter factor (what the
+    #: caliper-fit line d0 was fitted to); a diameter effect must not contradict them
+    cal_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cal_d: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cal_line: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the fitted line there
 
     def direction(self, pitch_deg: float) -> np.ndarray:
         return probe_direction(self.azimuth, self.t_push, self.base_pitch_deg + pitch_deg)
@@ -132,9 +137,12 @@ def trial_geometry(trial, config: ModelConfig) -> TrialGeometry:
     d0 = fit["d_centroid"] + fit["factor"] * fit["slope"] * (s - fit["s_centroid"])
     pp = trial.cane.push_point(trial.push_id)
     t_push = _tangent_at(rod, s_p)
+    cal = chain.meta["calipers"]
+    cal_s = np.array(cal["s"], float)
     return TrialGeometry(trial.id, trial.cane.id, s, w, d0, Mb, Mt, M_root, rod.modulus, rod.poisson_ratio,
                          rod.min_diameter, np.array(pp.direction, float), t_push, cfg.probe_angle_deg, s_p,
-                         float(p[2] - P[0][2]))
+                         float(p[2] - P[0][2]), cal_s, fit["factor"] * np.array(cal["diameter"], float),
+                         fit["d_centroid"] + fit["factor"] * fit["slope"] * (cal_s - fit["s_centroid"]))
 
 
 def _tangent_at(rod, s: float) -> np.ndarray:

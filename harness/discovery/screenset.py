@@ -19,7 +19,7 @@ linearization error.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,6 +27,31 @@ from ..model.effects import AppliedEffects, EffectSpec
 from .screen import TrialGeometry
 
 EZ = np.array([0.0, 0.0, 1.0])
+#: scatter of caliper readings about each cane's fitted line when no cane has more calipers than
+#: the line has parameters (nothing to estimate it from): a few tenths of a millimetre, what bud
+#: bumps and ovality give on a woody cane read with a digital caliper
+CALIPER_SIGMA_DEFAULT_M = 0.25e-3
+#: floor of the estimated scatter: readings rounded to 0.1 mm scatter by 0.03 mm from rounding alone
+CALIPER_SIGMA_FLOOR_M = 0.05e-3
+
+
+def caliper_sigma(geoms: list[TrialGeometry]) -> float:
+    """Pooled scatter (m) of the caliper readings about each cane's fitted line (one estimate per dataset).
+
+    Each cane's line has two parameters, so a cane with n distinct caliper places gives n - 2
+    degrees of freedom; with none anywhere, :data:`CALIPER_SIGMA_DEFAULT_M`.
+    """
+    ss, dof = 0.0, 0
+    seen: set[str] = set()
+    for g in geoms:
+        if g.cane in seen or len(g.cal_s) == 0:
+            continue
+        seen.add(g.cane)
+        n = len(np.unique(np.round(g.cal_s, 6)))
+        if n > 2:
+            ss += float(np.sum((g.cal_d - g.cal_line) ** 2))
+            dof += n - 2
+    return max(float(np.sqrt(ss / dof)), CALIPER_SIGMA_FLOOR_M) if dof else CALIPER_SIGMA_DEFAULT_M
 
 
 def _quad_coeffs(K: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -57,6 +82,13 @@ class ScreenSet:
     c0: np.ndarray  # (n,) cane compliance at the anchor (no effects unless anchored)
     s0: float = 0.0  # series compliance (m/N) at the anchor
     anchor: tuple = ()  # the EffectSpecs the anchor's engine stiffness was computed with
+    #: the calipers (:meth:`caliper_nll`): every trial carries its cane's calipers with weight
+    #: 1 / (the cane's trial count), so a cane counts once in any subset or resample of whole canes
+    cal_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    cal_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cal_line: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the caliper-fit line there
+    cal_w: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cal_sigma: float = CALIPER_SIGMA_DEFAULT_M
 
     @classmethod
     def build(cls, geoms: list[TrialGeometry]) -> "ScreenSet":
@@ -78,6 +110,12 @@ class ScreenSet:
         out = cls([g.trial for g in geoms], np.array([g.cane for g in geoms]), arr["idx"], arr["s"], arr["w"],
                   arr["d0"], arr["kaa"], arr["kae"], arr["kee"], np.array(raa), np.array(rae), np.array(ree),
                   np.array(E), np.array(th0), min(g.min_diameter for g in geoms), np.zeros(len(geoms)))
+        per_cane = {c: int(np.sum(out.canes == c)) for c in np.unique(out.canes)}
+        out.cal_idx = np.concatenate([np.full(len(g.cal_s), i) for i, g in enumerate(geoms)]).astype(int)
+        out.cal_s = np.concatenate([g.cal_s for g in geoms])
+        out.cal_line = np.concatenate([g.cal_line for g in geoms])
+        out.cal_w = np.concatenate([np.full(len(g.cal_s), 1.0 / per_cane[g.cane]) for g in geoms])
+        out.cal_sigma = caliper_sigma(geoms)
         out.c0 = out.compliance(AppliedEffects([]))[0]
         return out
 
@@ -85,10 +123,12 @@ class ScreenSet:
         keep = np.asarray(keep, bool)
         new_index = np.cumsum(keep) - 1
         pts = keep[self.idx]
+        cal = keep[self.cal_idx]
         return ScreenSet([t for t, k in zip(self.trials, keep) if k], self.canes[keep], new_index[self.idx[pts]],
                          self.s[pts], self.w[pts], self.d0[pts], self.kaa[pts], self.kae[pts], self.kee[pts],
                          self.raa[keep], self.rae[keep], self.ree[keep], self.E[keep], self.th0[keep], self.min_d,
-                         self.c0[keep], self.s0, self.anchor)
+                         self.c0[keep], self.s0, self.anchor, new_index[self.cal_idx[cal]], self.cal_s[cal],
+                         self.cal_line[cal], self.cal_w[cal], self.cal_sigma)
 
     def anchored(self, specs: tuple[EffectSpec, ...]) -> "ScreenSet":
         """The same trials, with predictions relative to an engine run of the model ``specs``."""
@@ -96,6 +136,19 @@ class ScreenSet:
 
         cc, series = self.compliance(AppliedEffects([s.instance() for s in specs]))
         return replace(self, c0=cc, s0=series, anchor=tuple(specs))
+
+    def caliper_nll(self, fx: AppliedEffects) -> float:
+        """-log likelihood of the calipers' readings added by the diameter effects in ``fx``.
+
+        A diameter effect (a base flare) changes the cane where the calipers measured it only as
+        far as their scatter about the fitted line allows: the model must still read what they
+        read. Its change d_fx - d_line at each caliper is scored as a Gaussian misfit of scale
+        :attr:`cal_sigma`; without a diameter effect the term is 0.
+        """
+        if not fx.changes_diameter or len(self.cal_s) == 0:
+            return 0.0
+        dev = fx.diameter(self.cal_s, self.cal_line) - self.cal_line
+        return float(0.5 * np.sum(self.cal_w * (dev / self.cal_sigma) ** 2))
 
     def compliance(self, fx: AppliedEffects) -> tuple[np.ndarray, np.ndarray]:
         """(cane compliance (n,), series compliance (scalar)) under ``fx`` (global values)."""

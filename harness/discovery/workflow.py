@@ -53,7 +53,7 @@ from ..data.rig import read_rig_csv
 from ..execute.pipeline import field_stage
 from ..execute.runner import run_trials
 from ..model.config import ModelConfig
-from ..model.effects import EFFECTS, EffectSpec
+from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
 from ..model.presets import PRESETS
 from ..probe.protocol import PROTOCOLS
 from .fit import Candidate, bootstrap_ci, cross_validate, direction_test_p, fit_candidate, sign_flip_p
@@ -334,6 +334,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     lkf = np.log(F.k_field.to_numpy(float))
     lkb = np.log(F.k_base.to_numpy(float))
     timing["screen_build_s"] = time.perf_counter() - t2
+    notes.append(f"calipers: readings scatter {1e3 * ss.cal_sigma:.2f} mm about each cane's fitted line (pooled); "
+                 f"a diameter effect's change at the calipers is scored against it, so a flare stays below them")
 
     # -- selection
     t3 = time.perf_counter()
@@ -470,6 +472,12 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         named.append({"effect": spec.name, "scope": "global", "params": dict(spec.params),
                       "ci95": {p: list(ci[(spec.name, p)]) for p, _ in spec.params if (spec.name, p) in ci},
                       "units": {p: EFFECTS[spec.name].parameters[p].unit for p, _ in spec.params}})
+        fx1 = AppliedEffects([spec.instance()])
+        if fx1.changes_diameter and len(ss.cal_s):
+            # what the calipers would have read differently (mm), against their own scatter
+            dev = fx1.diameter(ss.cal_s, ss.cal_line) - ss.cal_line
+            named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(dev))),
+                                           "caliper_scatter": 1e3 * ss.cal_sigma}
     if obstruction or early:
         local = {k: {"onset_mm": v} for k, v in onsets.items()}
         local.update({k: {"onset_mm": e.onset_mm, "contact_mm": e.contact_mm, "excluded": True}

@@ -277,6 +277,7 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
         "nodes_s": nodes_s.tolist(),
         "diameter_fit": {"s_centroid": fit.s_centroid, "d_centroid": fit.d_centroid, "slope": fit.slope,
                          "factor": fit.factor},
+        "calipers": {"s": cal_s.tolist(), "diameter": cal_d.tolist()},
         "config": config.to_dict(),
         "assumptions": list(cane.provenance.get("assumptions", [])),
         "warnings": warnings,
