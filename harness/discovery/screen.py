@@ -67,11 +67,12 @@ class TrialGeometry:
     base_pitch_deg: float
     s_push: float
     height: float
-    #: the cane's calipers: arc lengths and readings (m), times the diameter factor (what the
-    #: caliper-fit line d0 was fitted to); a diameter effect must not contradict them
+    #: the cane's calipers: arc lengths (m); each reading's residual about the least-squares line
+    #: through them (m, before the diameter factor, which scales the line and not the readings);
+    #: and the model's line d0 there (factor applied). A diameter effect must not contradict them.
     cal_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    cal_d: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    cal_line: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the fitted line there
+    cal_resid: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cal_line: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def direction(self, pitch_deg: float) -> np.ndarray:
         return probe_direction(self.azimuth, self.t_push, self.base_pitch_deg + pitch_deg)
@@ -141,7 +142,8 @@ def trial_geometry(trial, config: ModelConfig) -> TrialGeometry:
     cal_s = np.array(cal["s"], float)
     return TrialGeometry(trial.id, trial.cane.id, s, w, d0, Mb, Mt, M_root, rod.modulus, rod.poisson_ratio,
                          rod.min_diameter, np.array(pp.direction, float), t_push, cfg.probe_angle_deg, s_p,
-                         float(p[2] - P[0][2]), cal_s, fit["factor"] * np.array(cal["diameter"], float),
+                         float(p[2] - P[0][2]), cal_s,
+                         np.array(cal["diameter"], float) - (fit["d_centroid"] + fit["slope"] * (cal_s - fit["s_centroid"])),
                          fit["d_centroid"] + fit["factor"] * fit["slope"] * (cal_s - fit["s_centroid"]))
 
 
