@@ -130,6 +130,10 @@ def fit_candidate(cand: Candidate, ss: ScreenSet, log_k_field: np.ndarray, log_k
                   fixed: tuple[EffectSpec, ...] = (), x0: np.ndarray | None = None) -> Fit:
     """Maximum likelihood of ``cand``'s free parameters (with ``fixed`` effects in place)."""
     groups = ss.canes
+    # the calipers are data too: a diameter effect may not contradict their readings (whether one
+    # is in the fit depends on the effects' names only, not on the parameter values tried)
+    x_any = np.zeros(len(cand.free))
+    diameter = AppliedEffects([s.instance() for s in fixed + cand.specs(x_any)]).changes_diameter
 
     def obj(x: np.ndarray) -> float:
         specs = fixed + cand.specs(x)
@@ -137,8 +141,8 @@ def fit_candidate(cand: Candidate, ss: ScreenSet, log_k_field: np.ndarray, log_k
         r = log_k_field - lp
         if not np.all(np.isfinite(r)):
             return 1e12
-        # the calipers are data too: a diameter effect may not contradict their readings
-        return nll(r, groups) + ss.caliper_nll(AppliedEffects([s.instance() for s in specs]))
+        penalty = ss.caliper_nll(AppliedEffects([s.instance() for s in specs])) if diameter else 0.0
+        return nll(r, groups) + penalty
 
     if not cand.free:
         v = obj(np.zeros(0))
@@ -352,13 +356,16 @@ def bootstrap_ci(fit: Fit, ss: ScreenSet, log_k_field: np.ndarray, log_k_base: n
 
 def _take(ss: ScreenSet, rows: np.ndarray, labels: np.ndarray) -> ScreenSet:
     """A ScreenSet of the given trial rows (repeats allowed) with new cane labels."""
-    parts = [np.flatnonzero(ss.idx == i) for i in rows]
-    pts = np.concatenate(parts)
-    idx = np.concatenate([np.full(len(p), k) for k, p in enumerate(parts)])
-    cparts = [np.flatnonzero(ss.cal_idx == i) for i in rows]
-    cpts = np.concatenate(cparts) if cparts else np.zeros(0, int)
-    cidx = np.concatenate([np.full(len(p), k) for k, p in enumerate(cparts)]) if cparts else np.zeros(0, int)
+    pts, idx = _gather(ss.idx, rows)  # quadrature points
+    cpts, cidx = _gather(ss.cal_idx, rows)  # calipers
     return ScreenSet([ss.trials[i] for i in rows], np.asarray(labels), idx, ss.s[pts], ss.w[pts], ss.d0[pts],
                      ss.kaa[pts], ss.kae[pts], ss.kee[pts], ss.raa[rows], ss.rae[rows], ss.ree[rows], ss.E[rows],
-                     ss.th0[rows], ss.min_d, ss.c0[rows], ss.s0, ss.anchor, cidx.astype(int), ss.cal_s[cpts],
+                     ss.th0[rows], ss.min_d, ss.c0[rows], ss.s0, ss.anchor, cidx, ss.cal_s[cpts],
                      ss.cal_line[cpts], ss.cal_w[cpts], ss.cal_sigma)
+
+
+def _gather(owner: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions of the points owned by each trial in ``rows`` (repeats allowed), and their new owners."""
+    parts = [np.flatnonzero(owner == i) for i in rows]
+    return (np.concatenate(parts).astype(int),
+            np.concatenate([np.full(len(p), k, dtype=int) for k, p in enumerate(parts)]))

@@ -27,12 +27,13 @@ k_base is that run's stiffness and the formula becomes
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..model.chain import build_chain, probe_direction
 from ..model.config import ModelConfig
+from ..model.diameter import DiameterFit
 from ..model.effects import AppliedEffects
 
 MAX_SUB_M = 0.005
@@ -134,17 +135,15 @@ def trial_geometry(trial, config: ModelConfig) -> TrialGeometry:
     t0 = (P[1] - P[0]) / np.linalg.norm(P[1] - P[0])
     A0 = _cross_matrix(p - P[0])
     M_root = A0.T @ (np.eye(3) - np.outer(t0, t0)) @ A0
-    fit = chain.meta["diameter_fit"]
-    d0 = fit["d_centroid"] + fit["factor"] * fit["slope"] * (s - fit["s_centroid"])
+    line = DiameterFit(**chain.meta["diameter_fit"])  # the model's line (diameter factor applied)
     pp = trial.cane.push_point(trial.push_id)
     t_push = _tangent_at(rod, s_p)
     cal = chain.meta["calipers"]
     cal_s = np.array(cal["s"], float)
-    return TrialGeometry(trial.id, trial.cane.id, s, w, d0, Mb, Mt, M_root, rod.modulus, rod.poisson_ratio,
+    resid = np.array(cal["diameter"], float) - replace(line, factor=1.0)(cal_s)  # about the unscaled fit
+    return TrialGeometry(trial.id, trial.cane.id, s, w, line(s), Mb, Mt, M_root, rod.modulus, rod.poisson_ratio,
                          rod.min_diameter, np.array(pp.direction, float), t_push, cfg.probe_angle_deg, s_p,
-                         float(p[2] - P[0][2]), cal_s,
-                         np.array(cal["diameter"], float) - (fit["d_centroid"] + fit["slope"] * (cal_s - fit["s_centroid"])),
-                         fit["d_centroid"] + fit["factor"] * fit["slope"] * (cal_s - fit["s_centroid"]))
+                         float(p[2] - P[0][2]), cal_s, resid, line(cal_s))
 
 
 def _tangent_at(rod, s: float) -> np.ndarray:

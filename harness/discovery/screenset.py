@@ -151,8 +151,11 @@ class ScreenSet:
         """
         if not fx.changes_diameter or len(self.cal_s) == 0:
             return 0.0
-        dev = fx.diameter(self.cal_s, self.cal_line) - self.cal_line
-        return float(0.5 * np.sum(self.cal_w * (dev / self.cal_sigma) ** 2))
+        return float(0.5 * np.sum(self.cal_w * (self.caliper_change(fx) / self.cal_sigma) ** 2))
+
+    def caliper_change(self, fx: AppliedEffects) -> np.ndarray:
+        """What the effects ``fx`` change the diameter by (m) at every caliper of every trial."""
+        return fx.diameter(self.cal_s, self.cal_line) - self.cal_line
 
     def compliance(self, fx: AppliedEffects) -> tuple[np.ndarray, np.ndarray]:
         """(cane compliance (n,), series compliance (scalar)) under ``fx`` (global values)."""

@@ -475,8 +475,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         fx1 = AppliedEffects([spec.instance()])
         if fx1.changes_diameter and len(ss.cal_s):
             # what the calipers would have read differently (mm), against their own scatter
-            dev = fx1.diameter(ss.cal_s, ss.cal_line) - ss.cal_line
-            named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(dev))),
+            named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(ss.caliper_change(fx1)))),
                                            "caliper_scatter": 1e3 * ss.cal_sigma}
     if obstruction or early:
         local = {k: {"onset_mm": v} for k, v in onsets.items()}
