@@ -34,8 +34,12 @@ def figures(out: str | Path) -> list[Path]:
     ax.set_ylabel("ln(k_field / k_model)")
     named = ", ".join(n["effect"] for n in doc["named"]) or "nothing named"
     g = doc["gap"]
+    after = g["after_cv"]
+    if doc.get("partial"):  # the points are the library's best account, whose names were withheld
+        named += "; partial (not named): " + ", ".join(n["effect"] for n in doc["partial"])
+        after = g["partial_after_cv"]
     ax.set_title(f"{named}: median |ln| {g['before']['median_abs_log_ratio']:.3f} -> "
-                 f"{g['after_cv']['median_abs_log_ratio']:.3f} out of sample", fontsize=9)
+                 f"{after['median_abs_log_ratio']:.3f} out of sample", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
     p = out / "discovery_gap.png"
@@ -69,17 +73,22 @@ def section(folder: str | Path) -> str:
     doc = json.loads(f.read_text())
     g = doc["gap"]
     rows = []
-    for n in doc["named"]:
+    partial = doc.get("partial") or []
+    for n in doc["named"] + partial:
         ps = "; ".join(f"{k} = {v:.4g} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}] {n.get('units', {}).get(k, '')}"
                        if k in n.get("ci95", {}) else f"{k} = {v:.4g}" for k, v in n["params"].items())
         if n["effect"] == "obstruction":
             ps = f"{n.get('n_trials', len(n.get('local', {})))} trial(s): " + ", ".join(
                 f"{t} at {v['onset_mm']:.1f} mm" + (" (soft contact before it: left out)" if v.get("excluded") else "")
                 for t, v in n.get("local", {}).items())
-        rows.append(f"<tr><td>{html.escape(n['effect'])}</td><td>{n['scope']}</td><td>{html.escape(ps)}</td></tr>")
+        label = html.escape(n["effect"]) + (" <i>(partial: not named)</i>" if n in partial else "")
+        rows.append(f"<tr><td>{label}</td><td>{n['scope']}</td><td>{html.escape(ps)}</td></tr>")
     eng = ""
     if "per_backend" in g:
-        eng = "<table><tr><th>backend</th><th>before median / worst</th><th>after (in sample)</th>" \
+        which = "the partial model" if any(v.get("model") == "partial" for v in g["per_backend"].values()) else \
+            "the named model"
+        eng = f"<p>Every engine before and with {which}:</p>" \
+              "<table><tr><th>backend</th><th>before median / worst</th><th>after (in sample)</th>" \
               "<th>after, out of sample</th><th>screen vs engine (max |d ln k|): anchored / linear only</th></tr>" + "".join(
             f"<tr><td>{b}</td><td>{v['before_median']:.3f} / {v['before_worst']:.3f}</td>"
             f"<td>{v['after_median']:.3f} / {v['after_worst']:.3f}</td>"
@@ -99,8 +108,12 @@ def section(folder: str | Path) -> str:
     if ad.get("after_cv"):
         b, a = ad["before"], ad["after_cv"]
         notes += (f"<li>adequacy ({html.escape(ad['test'])}): r = {b['r']:.2f} (p = {b['p']:.2g}) before, "
-                  f"r = {a['r']:.2f} (p = {a['p']:.2g}) after, over {a['n_canes']} canes; below p = {ad['alpha']} the "
-                  f"model is called incomplete</li>")
+                  f"r = {a['r']:.2f} (p = {a['p']:.2g}) after, over {a['n_canes']} canes; the calipers' own error "
+                  f"alone gives r about {a.get('null_median', float('nan')):.2f}; below p = {ad['alpha']} the model "
+                  f"is called incomplete and its effects are reported as partial, not named</li>")
+    if "partial_after_cv" in g:
+        notes += (f"<li>the partial model's gap, out of sample: median {g['partial_after_cv']['median_abs_log_ratio']:.3f}"
+                  f" (worst {g['partial_after_cv']['worst_abs_log_ratio']:.3f}); model_partial.yaml holds it</li>")
     return f"""
 <h2>Discovery: what the model misses</h2>
 <p>Baseline <b>{html.escape(doc['baseline'])}</b>. Median |ln(k_model/k_field)|

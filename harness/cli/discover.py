@@ -38,7 +38,7 @@ def main(a: argparse.Namespace) -> int:
 
         out = Path(a.out if a.out != "canebench-runs/discover" else "canebench-runs/discover-selftest")
         df = run_selftest(out, a.seed, a.workers, only=a.selftest_cases)
-        cols = ["id", "named", "unexplained", "adequacy_p", "size", "gap_before", "gap_after_cv"] + \
+        cols = ["id", "named", "partial", "unexplained", "adequacy_p", "size", "gap_before", "gap_after_cv"] + \
                [c for c in df.columns if c.startswith("err_")]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
         print(json.dumps(summarize(df), indent=2, default=float))
@@ -59,28 +59,36 @@ def main(a: argparse.Namespace) -> int:
     print(f"canebench discover: {len(trials)} trials, baseline {res.baseline}")
     for n in doc["notes"]:
         print(f"  {n}")
-    for n in doc["named"]:
+    for n in doc["named"] + doc.get("partial", []):
+        what = "named" if n in doc["named"] else "partial (not named: the model does not scale as the data)"
         if n["effect"] == "obstruction":
             print(f"  named: obstruction in {n['n_trials']} trial(s): "
                   + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" for t, v in n["local"].items()))
         else:
-            print(f"  named: {n['effect']} " + ", ".join(
+            print(f"  {what}: {n['effect']} " + ", ".join(
                 f"{k} = {v:.4g} {n['units'].get(k, '')} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}]"
                 for k, v in n["params"].items()))
-    if not doc["named"]:
+    if doc.get("partial") and not any(n["scope"] == "global" for n in doc["named"]):
+        print("  named: nothing; the library's best account (partial, above) does not scale across canes as the "
+              "data do")
+    elif not doc["named"]:
         print("  named: nothing in the library explains the residual significantly")
     print(f"  stopped: {doc['stop_reason']}")
     print(f"  median |ln k_model/k_field|: {g['before']['median_abs_log_ratio']:.3f} before, "
           f"{g['after_cv']['median_abs_log_ratio']:.3f} after (out of sample); worst "
           f"{g['before']['worst_abs_log_ratio']:.3f} -> {g['after_cv']['worst_abs_log_ratio']:.3f}")
+    if "partial_after_cv" in g:
+        print(f"  partial model: {g['partial_after_cv']['median_abs_log_ratio']:.3f} (out of sample); worst "
+              f"{g['partial_after_cv']['worst_abs_log_ratio']:.3f}; {Path(a.out) / 'model_partial.yaml'}")
     for b, v in g.get("per_backend", {}).items():
-        print(f"  {b:10s} before {v['before_median']:.3f}  after {v['after_median']:.3f} (in sample)  "
+        print(f"  {b:10s} ({v.get('model', 'named')} model) before {v['before_median']:.3f}  after {v['after_median']:.3f} (in sample)  "
               f"{v['after_cv_median']:.3f} (out of sample)  screen vs engine {v['screen_vs_engine_max']:.2g} "
               f"(linear screen alone {v.get('linear_screen_vs_engine_max', float('nan')):.2g})")
     ad = doc.get("adequacy", {}).get("after_cv")
     if ad:
         print(f"  adequacy (held-out residual vs the model's stiffness level, between {ad['n_canes']} canes): "
-              f"r = {ad['r']:.2f}, p = {ad['p']:.3g} (alpha {doc['adequacy']['alpha']})")
+              f"r = {ad['r']:.2f} (the calipers' own error alone: {ad.get('null_median', float('nan')):.2f}), "
+              f"p = {ad['p']:.3g} (alpha {doc['adequacy']['alpha']})")
     print(f"  unexplained (residual structure, or a model that does not scale as the data): {doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")
     return 0

@@ -154,12 +154,17 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     res = discover(load_dataset(folder), confirm=False, executor=make_executor("serial", 1, None), n_boot=40,
                    seed=case["seed"])
     doc = res.to_json()
+    # what the row was scored from, beside it: a row can be checked or re-scored without re-running
+    _write_json_atomic(folder / "discovery.json", doc)
+    res.trials.to_csv(folder / "discovery.csv", index=False)
     truth = json.loads((folder / "truth" / "truth.json").read_text())
     effects = truth["effects"]  # a pair's strengths may have been redrawn (see _generate_case)
     named = {n["effect"]: n for n in doc["named"]}
     hidden = set(case["effects"]) & set(LIBRARY)
     row: dict[str, Any] = {"id": case["id"], "kind": case["kind"], "hidden": "+".join(case["effects"]) or "none",
                            "named": "+".join(named) or "none", "unexplained": doc["unexplained"],
+                           # the library's best account when the adequacy check withheld its names
+                           "partial": "+".join(n["effect"] for n in doc.get("partial", [])),
                            "size": _effect_size(folder), "wall_s": time.perf_counter() - t0,
                            "gap_before": doc["gap"]["before"]["median_abs_log_ratio"],
                            "gap_after_cv": doc["gap"]["after_cv"]["median_abs_log_ratio"]}
@@ -241,6 +246,10 @@ def run_selftest(out: str | Path, seed: int = 7, workers: int = 2, cases: list[d
     return df
 
 
+def _col(df: pd.DataFrame, col: str) -> pd.Series:
+    return df[col].fillna("").astype(str) if col in df else pd.Series("", index=df.index)
+
+
 def _flag(df: pd.DataFrame, col: str) -> pd.Series:
     return df[col].fillna(False).astype(bool) if col in df else pd.Series(False, index=df.index)
 
@@ -265,6 +274,8 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "unexplained_on_correctly_named": int(df[df.kind.isin(["single", "pair"]) & df.correct].unexplained.sum()),
         "n_correctly_named": int((df.kind.isin(["single", "pair"]) & df.correct).sum()),
         "out_of_library_misnamed": int((df[df.kind == "out_of_library"].named != "none").sum()),
+        # the withholding's cost: a hidden library effect fitted, then reported as partial only
+        "names_withheld_where_hidden": int((df.kind.isin(["single", "pair"]) & (_col(df, "partial") != "")).sum()),
         "n_out_of_library": int((df.kind == "out_of_library").sum()),
     }
     for p in ("scale", "k_root", "k_rig", "angle_deg"):

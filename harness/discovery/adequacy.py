@@ -1,0 +1,141 @@
+"""The adequacy check with the caliper-fit geometry's own error in its null.
+
+The check asks whether the held-out residual trends with the model's own
+stiffness level between canes (:func:`.structure.level_trend` is its plain
+permutation form). Level and residual are not independent under a correct
+model: both carry the error of the cane's caliper-fit line. A line that reads
+a cane too thick raises the model's ln k by g and lowers the residual by the
+same g, so r is biased negative by var(g); with three calipers near the push
+points the line is extrapolated a metre down to the base, where the bending
+moment is largest, and g is a few tenths in ln k (as large as the canes' own
+modulus scatter). A permutation null ignores this and flags correct models.
+
+The null here is a parametric bootstrap of that error, from the data:
+
+* each cane's line error (centroid diameter, slope) is drawn from the
+  calipers' pooled scatter about the lines (:attr:`ScreenSet.cal_sigma`) and
+  the cane's own caliper positions (least-squares covariance), and the
+  model's ln k recomputed on the screen with the perturbed line: g per trial;
+* cane-mean residual* = b + e - g and level* = L + g, with the trial noise e
+  from the within-cane residual variance, the canes' own offsets b from what
+  remains of the between-cane variance, and L the observed cane-mean level
+  shrunk about its mean by the error's share of its variance (the observed
+  level already carries one line error);
+* the observed r is placed in the distribution of r*.
+
+The geometry share is bounded by the data: residual = b + e - g with
+independent parts, so var(g) cannot exceed the cane means' variance less the
+trial noise's share. Where the calipers' scatter says more (real calipers
+read bud bumps and ovality, not only line error) g is scaled down to that
+bound, the null narrowest the data allow.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from ..model.effects import EffectSpec
+from .screenset import ScreenSet, predict_log_k
+
+N_DRAWS = 2000
+
+
+def geometry_draws(ss: ScreenSet, log_k_anchor: np.ndarray, specs: tuple[EffectSpec, ...], factor: float = 1.0,
+                   n_draws: int = N_DRAWS, seed: int = 0) -> np.ndarray:
+    """(n_draws, n_trials): the model's change in ln k when each cane's caliper line is off by its own error.
+
+    The line d(s) = d_c + factor b (s - s_c) (:class:`~canebench.model.diameter.DiameterFit`)
+    through n readings with scatter sigma has independent errors sigma / sqrt(n) at the
+    centroid s_c and sigma / sqrt(sum (s - s_c)^2) in the slope. A cane with calipers at one
+    place only gets the centroid error.
+    """
+    rng = np.random.default_rng(seed)
+    n = len(ss.trials)
+    uniq, cane_of_trial = np.unique(ss.canes, return_inverse=True)
+    sc = np.zeros(len(uniq))
+    sd_c = np.zeros(len(uniq))
+    sd_b = np.zeros(len(uniq))
+    for k in range(len(uniq)):
+        first = int(np.flatnonzero(cane_of_trial == k)[0])
+        s = ss.cal_s[ss.cal_idx == first]  # every trial carries its cane's calipers
+        if len(s) == 0:
+            continue
+        sc[k] = float(s.mean())
+        sxx = float(np.sum((s - sc[k]) ** 2))
+        sd_c[k] = ss.cal_sigma / math.sqrt(len(s))
+        sd_b[k] = ss.cal_sigma / math.sqrt(sxx) if sxx > 1e-12 else 0.0
+    k_q = cane_of_trial[ss.idx]
+    lk0 = predict_log_k(ss, log_k_anchor, specs)
+    out = np.empty((n_draws, n))
+    # the prediction is taken relative to the anchor's compliance c0, so a perturbed line moves it
+    unanchored = replace(ss, anchor=("perturbed",))
+    for b in range(n_draws):
+        dc = rng.normal(0.0, 1.0, len(uniq)) * sd_c
+        db = rng.normal(0.0, 1.0, len(uniq)) * sd_b
+        d0 = ss.d0 + dc[k_q] + factor * db[k_q] * (ss.s - sc[k_q])
+        out[b] = predict_log_k(replace(unanchored, d0=d0), log_k_anchor, specs) - lk0
+    return out
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    a = a - a.mean()
+    b = b - b.mean()
+    den = math.sqrt(float(a @ a) * float(b @ b))
+    return float(a @ b / den) if den > 0 else 0.0
+
+
+def level_trend_geometry(canes: np.ndarray, resid: np.ndarray, level: np.ndarray, g: np.ndarray,
+                         seed: int = 0) -> dict[str, float]:
+    """Between-cane r of the cane-mean residual with the cane-mean level, against the geometry null.
+
+    Parameters
+    ----------
+    canes, resid, level : arrays (n,)
+        Cane of each trial, held-out ln k_field / k_model, the model's held-out ln k.
+    g : array (draws, n)
+        :func:`geometry_draws` for the same trials.
+
+    Returns
+    -------
+    dict
+        ``r``; two-sided ``p`` of r in the null's distribution; ``null_median`` (the bias a
+        permutation null ignores); ``geometry_sd`` (the cane means' share, after the bound);
+        ``n_canes``.
+    """
+    ok = np.isfinite(resid) & np.isfinite(level)
+    canes, resid, level, g = canes[ok], resid[ok], level[ok], g[:, ok]
+    uniq, inv = np.unique(canes, return_inverse=True)
+    cnt = np.bincount(inv).astype(float)
+    C = len(uniq)
+    if C < 4:
+        return {"r": math.nan, "p": 1.0, "null_median": math.nan, "geometry_sd": math.nan, "n_canes": int(C)}
+    rm = np.bincount(inv, resid) / cnt
+    lm = np.bincount(inv, level) / cnt
+    obs = _corr(rm, lm)
+    dfw = len(resid) - C
+    s2 = float(np.sum((resid - rm[inv]) ** 2) / dfw) if dfw > 0 else 0.0
+    gm = np.stack([np.bincount(inv, gb, minlength=C) for gb in g]) / cnt  # (draws, C)
+    vg = float(np.mean(gm.var(axis=0)))
+    room = max(0.0, float(np.var(rm)) - s2 * float(np.mean(1.0 / cnt)))
+    if vg > room:  # the data bound the geometry's share (module docstring)
+        gm = gm * math.sqrt(room / vg) if vg > 0 else gm
+        vg = room
+    tau2 = max(0.0, room - vg)
+    rng = np.random.default_rng(seed)
+    res = (rng.normal(0.0, math.sqrt(tau2), gm.shape) + rng.normal(0.0, 1.0, gm.shape) * np.sqrt(s2 / cnt)
+           - gm)
+    # the observed level already carries one line error: its true part has var(lm) - var(g), so
+    # level* = that part + g* has the observed spread (lm + g* would double the error's share)
+    vl = float(np.var(lm))
+    shrink = math.sqrt(max(0.0, vl - vg) / vl) if vl > 0 else 0.0
+    lev = (lm.mean() + shrink * (lm - lm.mean()))[None, :] + gm
+    rc = res - res.mean(axis=1, keepdims=True)
+    lc = lev - lev.mean(axis=1, keepdims=True)
+    null = np.sum(rc * lc, axis=1) / np.sqrt(np.sum(rc**2, axis=1) * np.sum(lc**2, axis=1))
+    B = len(null)
+    p = 2.0 * min((np.sum(null <= obs) + 1) / (B + 1), (np.sum(null >= obs) + 1) / (B + 1))
+    return {"r": obs, "p": float(min(1.0, p)), "null_median": float(np.median(null)),
+            "geometry_sd": math.sqrt(vg), "n_canes": int(C)}
