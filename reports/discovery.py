@@ -26,7 +26,8 @@ def figures(out: str | Path) -> list[Path]:
     x = np.arange(len(d))
     ax.axhline(0, color="k", lw=0.8)
     ax.plot(x, d.r_before, "o", ms=4, label=f"before ({doc['baseline']} baseline)")
-    ax.plot(x, d.r_after_cv, "s", ms=4, mfc="none", label="after, out of sample (leave one cane out)")
+    ax.plot(x, d.r_after_cv, "s", ms=4, mfc="none",
+            label=("partial model (not named)" if doc.get("partial") else "after") + ", out of sample (leave one cane out)")
     for xi, a, b in zip(x, d.r_before, d.r_after_cv):
         ax.plot([xi, xi], [a, b], color="0.7", lw=0.6)
     ax.set_xticks(x)
@@ -51,7 +52,8 @@ def figures(out: str | Path) -> list[Path]:
     for ax, f in zip(axes, feats):
         if f in d:
             ax.plot(d[f], d.r_before, "o", ms=3, label="before")
-            ax.plot(d[f], d.r_after_cv, "s", ms=3, mfc="none", label="after (CV)")
+            ax.plot(d[f], d.r_after_cv, "s", ms=3, mfc="none",
+                    label="partial model, not named (CV)" if doc.get("partial") else "after (CV)")
         ax.axhline(0, color="k", lw=0.6)
         ax.set_xlabel(f)
     axes[0].set_ylabel("ln(k_field / k_model)")
@@ -109,8 +111,12 @@ def section(folder: str | Path) -> str:
         b, a = ad["before"], ad["after_cv"]
         notes += (f"<li>adequacy ({html.escape(ad['test'])}): r = {b['r']:.2f} (p = {b['p']:.2g}) before, "
                   f"r = {a['r']:.2f} (p = {a['p']:.2g}) after, over {a['n_canes']} canes; the calipers' own error "
-                  f"alone gives r about {a.get('null_median', float('nan')):.2f}; below p = {ad['alpha']} the model "
-                  f"is called incomplete and its effects are reported as partial, not named</li>")
+                  f"alone gives r about {a.get('null_median', float('nan')):.2f}"
+                  + ("; the calipers' scatter exceeds what the residuals allow, so the null gives the line error all "
+                     "of the between-cane spread (its most lenient form)" if a.get("geometry_bounded") else "")
+                  + f"; below p = {ad['alpha']} the model is called incomplete"
+                  + ("; it is: its effects are reported as partial, not named" if doc.get("partial") else "")
+                  + "</li>")
     if "partial_after_cv" in g:
         notes += (f"<li>the partial model's gap, out of sample: median {g['partial_after_cv']['median_abs_log_ratio']:.3f}"
                   f" (worst {g['partial_after_cv']['worst_abs_log_ratio']:.3f}); model_partial.yaml holds it</li>")
@@ -120,7 +126,7 @@ def section(folder: str | Path) -> str:
 {g['before']['median_abs_log_ratio']:.3f} (worst {g['before']['worst_abs_log_ratio']:.3f}) before;
 {g['after_cv']['median_abs_log_ratio']:.3f} (worst {g['after_cv']['worst_abs_log_ratio']:.3f}) after, out of sample
 (leave one cane out). Share of the residual variance between canes: {bs.get('before', float('nan')):.2f} before,
-{bs.get('after_cv', float('nan')):.2f} after. Unexplained (residual structure, or a model that does not scale across canes as the data do): <b>{doc['unexplained']}</b>.
+{bs.get('after_cv', float('nan')):.2f} after{' (the partial model)' if doc.get('partial') else ''}. Unexplained (residual structure, or a model that does not scale across canes as the data do): <b>{doc['unexplained']}</b>.
 Selection stopped: {html.escape(doc.get('stop_reason', ''))}.</p>
 <table><tr><th>named effect</th><th>scope</th><th>parameters (95 % cane-bootstrap interval)</th></tr>{''.join(rows) or '<tr><td colspan=3>nothing named</td></tr>'}</table>
 {eng}

@@ -448,6 +448,7 @@ def test_discover_withholds_names_for_a_lateral_support_outside_the_library(tmp_
     a = res.adequacy["after_cv"]
     assert res.unexplained and res.adequacy["inadequate"], res.adequacy
     assert a["r"] < a["null_median"] < 0  # soft canes stiffer than the model, beyond the geometry's lean
+    assert a["p"] < 0.002 and not a["geometry_bounded"] and a["n_trials_left_out"] == 0
     assert not [n for n in res.named if n["scope"] == "global"], res.named
     assert res.partial and res.partial_config is not None and res.partial_config.effects
     assert [e.name for e in res.config.effects if e.name != "obstruction"] == []  # the model file names nothing
@@ -457,7 +458,8 @@ def test_discover_withholds_names_for_a_lateral_support_outside_the_library(tmp_
     from canebench.model.modelfile import load_model_file
 
     doc = json.loads((out / "discovery.json").read_text())
-    assert [n["effect"] for n in doc["partial"]] == [e.name for e in res.partial_config.effects]
+    assert [n["effect"] for n in doc["partial"]] == [e.name for e in res.partial_config.effects
+                                                     if e.name != "obstruction"]
     assert [e.name for e in load_model_file(out / "model.yaml").effects if e.name != "obstruction"] == []
     assert load_model_file(out / "model_partial.yaml").effects == res.partial_config.effects
     assert "partial: not named" in (out / "report.html").read_text()
@@ -764,3 +766,11 @@ def test_adequacy_holds_its_level_where_level_and_residual_share_the_geometry_er
              for i in range(50)]
     print("power at 0.01:", int(np.sum(np.array(power) < 0.01)), "of 50")
     assert np.sum(np.array(power) < 0.01) >= 30, np.sort(power)
+    # a draw the screen could not evaluate leaves its trial out, counted, instead of poisoning the null
+    c, r, lev, draws = table(lambda x: 0 * x)
+    bad = draws.copy()
+    bad[5, 7] = np.nan
+    keep = np.arange(54) != 7
+    got, ref = level_trend_geometry(c, r, lev, bad, seed=1), level_trend_geometry(c[keep], r[keep], lev[keep],
+                                                                                   draws[:, keep], seed=1)
+    assert got["n_trials_left_out"] == 1 and got["p"] == ref["p"] and np.isfinite(got["null_median"])
