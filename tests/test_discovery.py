@@ -693,12 +693,10 @@ def test_geometry_draws_carry_the_caliper_lines_least_squares_error_through_the_
     """Each cane's line error has the least-squares covariance (centroid sigma^2 / n, slope
     sigma^2 / Sxx, independent); to first order the trial's ln k moves by J_c dc + J_b db, with
     J from finite differences of the screen here, independently of the draws; and a Monte Carlo
-    of perturbed readings refitted with the chain's own line fit gives the same variance. Draws of 0.2 mm on
-    5-10 mm canes are 2-4 %, where d^-4 is linear to a few %: variance within 10 % (2000 draws
+    of perturbed readings refitted with the chain's own line fit gives the same variance. Draws
+    of 0.2 mm on 5-10 mm canes are 2-4 %, where d^-4 is linear to a few %: variance within 10 % (2000 draws
     give 3 % sampling error on a variance). A cane's trials share one line error: their g
     correlate; canes are independent."""
-    from dataclasses import replace
-
     from canebench.discovery.adequacy import geometry_draws
     from canebench.discovery.screen import trial_geometry
     from canebench.discovery.screenset import ScreenSet, predict_log_k
@@ -715,9 +713,9 @@ def test_geometry_draws_carry_the_caliper_lines_least_squares_error_through_the_
         s = ss.cal_s[ss.cal_idx == i]
         sc, sxx = s.mean(), np.sum((s - s.mean()) ** 2)
         pts = np.isin(ss.idx, np.flatnonzero(ss.canes == cane))
-        base = predict_log_k(replace(ss, anchor=("x",)), lkb, ())[i]
-        jc = (predict_log_k(replace(ss, anchor=("x",), d0=ss.d0 + h * pts), lkb, ())[i] - base) / h
-        jb = (predict_log_k(replace(ss, anchor=("x",), d0=ss.d0 + h * pts * (ss.s - sc)), lkb, ())[i] - base) / h
+        base = predict_log_k(ss.with_diameters(ss.d0), lkb, ())[i]
+        jc = (predict_log_k(ss.with_diameters(ss.d0 + h * pts), lkb, ())[i] - base) / h
+        jb = (predict_log_k(ss.with_diameters(ss.d0 + h * pts * (ss.s - sc)), lkb, ())[i] - base) / h
         assert jc > 0  # a thicker line: a stiffer cane
         var_lin[i] = ss.cal_sigma**2 * (jc**2 / len(s) + jb**2 / sxx)
     np.testing.assert_allclose(g.var(axis=0), var_lin, rtol=0.10)
@@ -733,7 +731,7 @@ def test_geometry_draws_carry_the_caliper_lines_least_squares_error_through_the_
     cal = {c: (ss.cal_s[ss.cal_idx == first[c]], ss.cal_line[ss.cal_idx == first[c]]) for c in canes}
     base_fit = {c: fit_diameter(*cal[c]) for c in canes}
     cane_q = ss.canes[ss.idx]
-    lk0 = predict_log_k(replace(ss, anchor=("x",)), lkb, ())
+    lk0 = predict_log_k(ss.with_diameters(ss.d0), lkb, ())
     mc = np.empty((2000, len(ss.trials)))
     for b in range(2000):
         dd = np.zeros_like(ss.d0)
@@ -742,7 +740,7 @@ def test_geometry_draws_carry_the_caliper_lines_least_squares_error_through_the_
             refit = fit_diameter(s_c, line + rng.normal(0.0, ss.cal_sigma, len(s_c)))
             q = cane_q == c
             dd[q] = refit(ss.s[q]) - base_fit[c](ss.s[q])
-        mc[b] = predict_log_k(replace(ss, anchor=("x",), d0=ss.d0 + dd), lkb, ()) - lk0
+        mc[b] = predict_log_k(ss.with_diameters(ss.d0 + dd), lkb, ()) - lk0
     ratio = g.var(axis=0) / mc.var(axis=0)
     assert np.all(np.abs(ratio - 1) < 0.25) and abs(ratio.mean() - 1) < 0.05, ratio
     same = [(i, j) for i in range(len(ss.trials)) for j in range(i) if ss.canes[i] == ss.canes[j]]

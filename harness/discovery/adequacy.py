@@ -37,12 +37,12 @@ field data it binds (the calipers scatter 1.06 mm about the lines).
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
 from ..model.effects import EffectSpec
 from .screenset import ScreenSet, predict_log_k
+from .structure import _corr
 
 N_DRAWS = 2000
 
@@ -74,21 +74,12 @@ def geometry_draws(ss: ScreenSet, log_k_anchor: np.ndarray, specs: tuple[EffectS
     k_q = cane_of_trial[ss.idx]
     lk0 = predict_log_k(ss, log_k_anchor, specs)
     out = np.empty((n_draws, n))
-    # the prediction is taken relative to the anchor's compliance c0, so a perturbed line moves it
-    unanchored = replace(ss, anchor=("perturbed",))
     for b in range(n_draws):
         dc = rng.normal(0.0, 1.0, len(uniq)) * sd_c
         db = rng.normal(0.0, 1.0, len(uniq)) * sd_b
         d0 = ss.d0 + dc[k_q] + factor * db[k_q] * (ss.s - sc[k_q])
-        out[b] = predict_log_k(replace(unanchored, d0=d0), log_k_anchor, specs) - lk0
+        out[b] = predict_log_k(ss.with_diameters(d0), log_k_anchor, specs) - lk0
     return out
-
-
-def _corr(a: np.ndarray, b: np.ndarray) -> float:
-    a = a - a.mean()
-    b = b - b.mean()
-    den = math.sqrt(float(a @ a) * float(b @ b))
-    return float(a @ b / den) if den > 0 else 0.0
 
 
 def level_trend_geometry(canes: np.ndarray, resid: np.ndarray, level: np.ndarray, g: np.ndarray,

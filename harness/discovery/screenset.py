@@ -27,6 +27,8 @@ from ..model.effects import AppliedEffects, EffectSpec
 from .screen import TrialGeometry
 
 EZ = np.array([0.0, 0.0, 1.0])
+#: the anchor tag of a screen moved off its anchor's geometry (:meth:`ScreenSet.with_diameters`)
+_OFF_ANCHOR = "off the anchor's geometry"
 #: scatter of caliper readings about each cane's fitted line when no cane has more calipers than
 #: the line has parameters (nothing to estimate it from): a few tenths of a millimetre, what bud
 #: bumps and ovality give on a woody cane read with a digital caliper
@@ -137,6 +139,17 @@ class ScreenSet:
 
         cc, series = self.compliance(AppliedEffects([s.instance() for s in specs]))
         return replace(self, c0=cc, s0=series, anchor=tuple(specs))
+
+    def with_diameters(self, d0: np.ndarray) -> "ScreenSet":
+        """The same trials on other caliper-fit diameters ``d0`` (one per quadrature point).
+
+        Still relative to this anchor's engine stiffness and compliance, but no longer *at* the
+        anchor: :func:`predict_log_k` must recompute even for the anchor's own effects (which it
+        otherwise returns unchanged), so the anchor tag is replaced by one no model matches.
+        """
+        from dataclasses import replace
+
+        return replace(self, d0=np.asarray(d0, float), anchor=(_OFF_ANCHOR,))
 
     def caliper_nll(self, fx: AppliedEffects) -> float:
         """Penalty (in -log likelihood units) for what the diameter effects in ``fx`` change at the calipers.
