@@ -827,3 +827,49 @@ def test_adequacy_holds_its_level_where_level_and_residual_share_the_geometry_er
     got, ref = level_trend_geometry(c, r, lev, bad, seed=1), level_trend_geometry(c[keep], r[keep], lev[keep],
                                                                                    draws[:, keep], seed=1)
     assert got["n_trials_left_out"] == 1 and got["p"] == ref["p"] and np.isfinite(got["null_median"])
+
+
+def test_the_selection_score_test_holds_its_level_where_the_residual_carries_the_caliper_line_error():
+    """Nulls on the bundled geometry whose residual carries each cane's caliper-line error at
+    the real calipers' scatter (0.9 mm; 1.06 pooled on the field data): r = -g + cane offsets
+    (0.15) + trial noise (0.05), g drawn by ``geometry_draws``. A cane read too thick is
+    predicted too stiff and measures softer, which a root spring beside a flare could mimic;
+    the score test's denominator carries each cane's whole contribution, so it should not.
+    Over 80 nulls, neither the first step's singles (Bonferroni 0.005 each) nor the pair test
+    (0.025) rejects 7 times or more (a test holding 0.025 does with probability 0.004). The
+    line error itself scatters the canes by about 0.9 in ln k at this scatter, so the test
+    sees only what stands out of it: a global shift of 0.8 (about 3.8 standard errors of a
+    mean over 18 canes) is seen in at least 15 of 20."""
+    import dataclasses
+    import itertools
+
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.discovery.adequacy import geometry_draws
+    from canebench.discovery.fit import Candidate, direction_test_p, fit_candidate
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet
+    from canebench.discovery.workflow import ALPHA, SCREENED
+    from canebench.model.presets import PRESETS
+
+    ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in load_dataset(bundled_dataset())])
+    lkb = -np.log(ss.c0 * 1e3)
+    g = geometry_draws(dataclasses.replace(ss, cal_sigma=0.9e-3), lkb, (), n_draws=100, seed=1)
+    assert 0.5 < np.std(g) < 1.5  # the line error moves ln k by about 0.9 at this scatter
+    _, inv = np.unique(ss.canes, return_inverse=True)
+    rng = np.random.default_rng(2)
+    pairs = list(itertools.combinations(SCREENED, 2))
+    level_single, level_pair = 0.5 * ALPHA / len(SCREENED), 0.5 * ALPHA
+
+    def rejections(i, shift):
+        lkf = lkb - g[i] + shift + rng.normal(0, 0.15, inv.max() + 1)[inv] + rng.normal(0, 0.05, len(lkb))
+        f0 = fit_candidate(Candidate.of(()), ss, lkf, lkb)
+        single = min(direction_test_p(c, ss, lkf, lkb, (), f0.s2, f0.t2, n_perm=2000, seed=i) for c in SCREENED)
+        pair = direction_test_p(pairs, ss, lkf, lkb, (), f0.s2, f0.t2, n_perm=2000, seed=i)
+        return single < level_single, pair < level_pair
+
+    nulls = np.array([rejections(i, 0.0) for i in range(80)])
+    print("singles / pairs rejecting over 80 nulls:", nulls.sum(axis=0))
+    assert nulls[:, 0].sum() < 7 and nulls[:, 1].sum() < 7, nulls.sum(axis=0)
+    shifted = np.array([rejections(80 + i, 0.8) for i in range(20)])
+    print("singles / pairs rejecting over 20 with the shift:", shifted.sum(axis=0))
+    assert shifted[:, 0].sum() >= 15, shifted.sum(axis=0)
