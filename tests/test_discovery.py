@@ -829,7 +829,7 @@ def test_adequacy_holds_its_level_where_level_and_residual_share_the_geometry_er
     assert got["n_trials_left_out"] == 1 and got["p"] == ref["p"] and np.isfinite(got["null_median"])
 
 
-def test_the_selection_score_test_holds_its_level_where_the_residual_carries_the_caliper_line_error():
+def test_the_selection_score_test_holds_its_level_where_the_residual_carries_the_caliper_line_error(bundled_trials):
     """Nulls on the bundled geometry whose residual carries each cane's caliper-line error at
     the real calipers' scatter (0.9 mm; 1.06 pooled on the field data): r = -g + cane offsets
     (0.15) + trial noise (0.05), g drawn by ``geometry_draws``. A cane read too thick is
@@ -843,7 +843,6 @@ def test_the_selection_score_test_holds_its_level_where_the_residual_carries_the
     import dataclasses
     import itertools
 
-    from canebench.data.dataset import bundled_dataset, load_dataset
     from canebench.discovery.adequacy import geometry_draws
     from canebench.discovery.fit import Candidate, direction_test_p, fit_candidate
     from canebench.discovery.screen import trial_geometry
@@ -851,7 +850,7 @@ def test_the_selection_score_test_holds_its_level_where_the_residual_carries_the
     from canebench.discovery.workflow import ALPHA, SCREENED
     from canebench.model.presets import PRESETS
 
-    ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in load_dataset(bundled_dataset())])
+    ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in bundled_trials])
     lkb = -np.log(ss.c0 * 1e3)
     g = geometry_draws(dataclasses.replace(ss, cal_sigma=0.9e-3), lkb, (), n_draws=100, seed=1)
     assert 0.5 < np.std(g) < 1.5  # the line error moves ln k by about 0.9 at this scatter

@@ -246,12 +246,9 @@ def run_selftest(out: str | Path, seed: int = 7, workers: int = 2, cases: list[d
     return df
 
 
-def _col(df: pd.DataFrame, col: str) -> pd.Series:
-    return df[col].fillna("").astype(str) if col in df else pd.Series("", index=df.index)
-
-
-def _flag(df: pd.DataFrame, col: str) -> pd.Series:
-    return df[col].fillna(False).astype(bool) if col in df else pd.Series(False, index=df.index)
+def _col(df: pd.DataFrame, col: str, empty: Any) -> pd.Series:
+    """Column ``col`` with missing cells (and a missing column: older rows) as ``empty``, of its type."""
+    return df[col].fillna(empty).astype(type(empty)) if col in df else pd.Series(empty, index=df.index)
 
 
 def summarize(df: pd.DataFrame) -> dict[str, Any]:
@@ -266,8 +263,8 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "pairs_both_named": int(df[df.kind == "pair"].correct.sum()),
         "n_pairs": int((df.kind == "pair").sum()),
         # pairs whose members both change stiffness by more than twice the noise beside the other
-        "pairs_resolvable_both_named": int(df[(df.kind == "pair") & _flag(df, "resolvable")].correct.sum()),
-        "n_pairs_resolvable": int(((df.kind == "pair") & _flag(df, "resolvable")).sum()),
+        "pairs_resolvable_both_named": int(df[(df.kind == "pair") & _col(df, "resolvable", False)].correct.sum()),
+        "n_pairs_resolvable": int(((df.kind == "pair") & _col(df, "resolvable", False)).sum()),
         "out_of_library_flagged_unexplained": int(df[df.kind == "out_of_library"].unexplained.sum()),
         # the flag's cost: raised where nothing outside the library is hidden
         "unexplained_on_nulls": int(df[df.kind == "null"].unexplained.sum()),
@@ -275,7 +272,7 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "n_correctly_named": int((df.kind.isin(["single", "pair"]) & df.correct).sum()),
         "out_of_library_misnamed": int((df[df.kind == "out_of_library"].named != "none").sum()),
         # the withholding's cost: a hidden library effect fitted, then reported as partial only
-        "names_withheld_where_hidden": int((df.kind.isin(["single", "pair"]) & (_col(df, "partial") != "")).sum()),
+        "names_withheld_where_hidden": int((df.kind.isin(["single", "pair"]) & (_col(df, "partial", "") != "")).sum()),
         "n_out_of_library": int((df.kind == "out_of_library").sum()),
     }
     for p in ("scale", "k_root", "k_rig", "angle_deg"):
