@@ -51,23 +51,42 @@ LIBRARY = ("modulus_scale", "root_compliance", "rig_compliance", "base_flare", "
 OUT_OF_LIBRARY = ("lateral_support",)
 
 
-def random_strength(name: str, rng: np.random.Generator, strong: bool = False) -> dict[str, float]:
+def random_strength(name: str, rng: np.random.Generator, strong: bool = False,
+                    stratum: tuple[int, int] | None = None) -> dict[str, float]:
     """A random strength of one effect (what the self-test hides).
 
     ``strong`` draws from the upper part of each range only (the two-effect sets: a
     pair tests whether two effects are told apart, which needs each to be visible).
+    ``stratum`` = (i, n) draws the strength uniformly within the i-th of n equal parts of
+    its range (log range for springs), so n datasets of one effect cover the range from
+    faint to strong instead of leaving its strong end to chance: the self-test's parameter
+    criterion is scored on the strong ones. Either way one uniform number is drawn per
+    strength, so the draws of other cases do not move.
+
+    Ranges (single / ``strong``): ``scale`` exp(+-[0.15, 0.7]) / exp(+-[0.35, 0.7]);
+    ``k_root`` [3, 150] / [3, 30] N m/rad (log); ``k_rig`` [20, 1500] / [40, 250] N/m (log);
+    ``collar`` [0.3, 1.2] / [0.7, 1.2] with ``length_m`` [0.12, 0.4] / [0.2, 0.4] (not
+    stratified); ``angle_deg`` +-[15, 40] / +-[28, 35].
     """
+
+    def u(lo: float, hi: float, log: bool = False) -> float:
+        x = rng.uniform() if stratum is None else (stratum[0] + rng.uniform()) / stratum[1]
+        if log:
+            return float(np.exp(np.log(lo) + x * (np.log(hi) - np.log(lo))))
+        return float(lo + x * (hi - lo))
+
     if name == "modulus_scale":
-        return {"scale": float(np.exp(rng.choice([-1, 1]) * rng.uniform(0.35 if strong else 0.15, 0.7)))}
+        return {"scale": float(np.exp(rng.choice([-1, 1]) * u(0.35 if strong else 0.15, 0.7)))}
     if name == "root_compliance":
-        return {"k_root": float(np.exp(rng.uniform(np.log(3.0), np.log(30.0 if strong else 150.0))))}
+        return {"k_root": u(3.0, 30.0 if strong else 150.0, log=True)}
     if name == "rig_compliance":
-        return {"k_rig": float(np.exp(rng.uniform(np.log(40.0), np.log(250.0 if strong else 1500.0))))}
+        # 20 N/m in series with a cane of 25 N/m moves ln k by about 0.8; 1500 N/m by about 0.02
+        return {"k_rig": u(40.0 if strong else 20.0, 250.0 if strong else 1500.0, log=True)}
     if name == "base_flare":
-        return {"collar": float(rng.uniform(0.7 if strong else 0.3, 1.2)),
-                "length_m": float(rng.uniform(0.2 if strong else 0.12, 0.4))}
+        return {"collar": u(0.7 if strong else 0.3, 1.2), "length_m": float(rng.uniform(0.2 if strong else 0.12, 0.4))}
     if name == "probe_misalignment":
-        return {"angle_deg": float(rng.choice([-1, 1]) * rng.uniform(28.0 if strong else 15.0, 35.0))}
+        # a pitch theta moves ln k by about -2 ln cos(theta): 0.07 at 15 deg, 0.53 at 40 deg
+        return {"angle_deg": float(rng.choice([-1, 1]) * u(28.0 if strong else 15.0, 35.0 if strong else 40.0))}
     if name == "obstruction":
         return {"fraction": 0.25}
     if name == "lateral_support":
@@ -174,6 +193,7 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                         break
                 xs, fs = np.array(xs), np.array(fs)
                 from scipy.interpolate import CubicSpline
+                from scipy.optimize import brentq
 
                 Fcane = CubicSpline(xs, fs)
                 k_lin = rod.linear_stiffness()
@@ -196,16 +216,18 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                 x_rig = delta0 + 0.5e-3 * np.arange(MAX_SAMPLES - n_dead)
                 x_cane = x_rig.copy()
                 F = np.zeros_like(x_rig)
+
+                def force(xc: float) -> float:
+                    return float(Fcane(min(xc, xs[-1]))) * mult + (k_obs * max(0.0, xc - onset) if onset else 0.0)
+
                 for i, xr in enumerate(x_rig):
                     xc = xr
-                    for _ in range(30 if k_rig else 1):  # series spring: x_rig = x_cane + F / k_rig
-                        f = float(Fcane(min(xc, xs[-1]))) * mult + (k_obs * max(0.0, xc - onset) if onset else 0.0)
-                        if not k_rig:
-                            break
-                        xc_new = xr - f / k_rig
-                        if abs(xc_new - xc) < 1e-9:
-                            break
-                        xc = 0.5 * xc + 0.5 * max(xc_new, 0.0)
+                    if k_rig and xr > 0 and force(xr) > 0:
+                        # series spring: x_rig = x_cane + F(x_cane) / k_rig, monotone in x_cane and
+                        # bracketed by [0, x_rig]; a root bracket, because a fixed-point iteration
+                        # diverges once the cane is more than about 3 times stiffer than the rig
+                        xc = brentq(lambda v: v + force(v) / k_rig - xr, 0.0, xr, xtol=1e-12)
+                    f = force(xc)
                     x_cane[i], F[i] = xc, f
                     if f / GF_TO_N >= 1000.0:
                         F = F[: i + 1]

@@ -587,6 +587,46 @@ def test_a_pair_is_redrawn_until_both_members_are_resolvable(tmp_path, monkeypat
     assert json.loads((tmp_path / "s" / "truth" / "truth.json").read_text())["effects"] == one["effects"]
 
 
+def test_the_selftest_draws_each_effect_once_in_every_fifth_of_its_range():
+    """The suite's 5 singles per effect are stratified: one strength in each fifth of the range
+    stated in ``random_strength``'s docstring (log range for springs), so the strong end, where
+    the issue's parameter criterion is scored, is in every suite whatever the seed. Unstratified,
+    the strongest fifth is missed by all 5 draws with probability 0.8^5 = 0.33 per effect."""
+    from canebench.discovery.selftest import suite
+
+    ranges = {  # effect, parameter, stated range, transform to the axis that is cut in fifths
+        ("modulus_scale", "scale"): (0.15, 0.7, lambda v: abs(math.log(v))),
+        ("root_compliance", "k_root"): (math.log(3.0), math.log(150.0), math.log),
+        ("rig_compliance", "k_rig"): (math.log(20.0), math.log(1500.0), math.log),
+        ("base_flare", "collar"): (0.3, 1.2, float),
+        ("probe_misalignment", "angle_deg"): (15.0, 40.0, abs),
+    }
+    for seed in (7, 8, 123):
+        singles = [c["effects"] for c in suite(seed) if c["kind"] == "single"]
+        for (eff, par), (lo, hi, f) in ranges.items():
+            x = [f(e[eff][par]) for e in singles if eff in e]
+            assert len(x) == 5 and all(lo <= v <= hi for v in x), (seed, eff, x)
+            assert sorted(int(5 * (v - lo) / (hi - lo)) for v in x) == [0, 1, 2, 3, 4], (seed, eff, x)
+
+
+def test_a_rig_softer_than_the_cane_gives_a_smooth_trace(tmp_path):
+    """The generator's series spring (x_rig = x_cane + F / k_rig) at the soft end of the
+    self-test's range: 20 N/m, beside canes up to ten times stiffer. The readings' second
+    differences carry the load cell's noise (sigma <= 3 gf, so sd <= 3 sqrt(6) = 7.3 gf), the
+    preload step at contact (<= 15 gf) and the trace's own bend; 40 gf is 5.5 of those sd. A
+    damped fixed-point solve of the series equation diverges once the cane is more than 3
+    times stiffer than the rig, and wrote swings of 100 gf between samples here."""
+    from canebench.canes.generate_hidden import generate_hidden
+
+    d = generate_hidden(tmp_path / "rig", 8010, {"rig_compliance": {"k_rig": 20.0}}, n_bushes=2)
+    truth = json.loads((d / "truth" / "truth.json").read_text())
+    ratios = [tr["k_linear_n_per_mm"] / 0.020 for c in truth["canes"].values() for tr in c["trials"].values()]
+    assert max(ratios) > 3.0  # the premise: some cane is stiffer than the rig by more than 3
+    for f in sorted((d / "trials").glob("*.csv")):
+        reading = pd.read_csv(f)["Load Cell Reading (gf)"].to_numpy()
+        assert np.max(np.abs(np.diff(reading, 2))) < 40.0, f.name
+
+
 def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones():
     """Selection's backward pass (``_backward``) on the bundled geometry, the engine re-anchoring
     replaced by a stand-in that records its calls. With a modulus scale and a stiff root hidden

@@ -1,7 +1,8 @@
 """``canebench discover --selftest``: the workflow on datasets with known hidden effects.
 
 A seeded suite (:func:`suite`): 5 datasets per library effect at random
-strengths, 5 with no hidden effect, 3 with two effects at once (each from
+strengths (one in each fifth of the effect's range, so the strong end is always
+tested), 5 with no hidden effect, 3 with two effects at once (each from
 the upper part of its range, redrawn until both are resolvable: see
 :func:`_generate_case`), 2 with an
 effect that is not in the library (a neighbouring cane as a lateral spring
@@ -40,8 +41,8 @@ def suite(seed: int = 7, per_effect: int = 5, nulls: int = 5, pairs: int = 3, oo
     rng = np.random.default_rng(seed)
     out = []
     for name in LIBRARY:
-        for _ in range(per_effect):
-            out.append({"kind": "single", "effects": {name: random_strength(name, rng)}})
+        for i in range(per_effect):
+            out.append({"kind": "single", "effects": {name: random_strength(name, rng, stratum=(i, per_effect))}})
     for _ in range(nulls):
         out.append({"kind": "null", "effects": {}})
     for a, b in PAIRS[:pairs]:
