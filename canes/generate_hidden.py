@@ -61,7 +61,8 @@ def random_strength(name: str, rng: np.random.Generator, strong: bool = False,
     its range (log range for springs), so n datasets of one effect cover the range from
     faint to strong instead of leaving its strong end to chance: the self-test's parameter
     criterion is scored on the strong ones. Either way one uniform number is drawn per
-    strength, so the draws of other cases do not move.
+    strength, so the suite's other cases keep their draws (a pair's redraws, from the
+    whole range, do follow the ranges).
 
     Ranges (single / ``strong``): ``scale`` exp(+-[0.15, 0.7]) / exp(+-[0.35, 0.7]);
     ``k_root`` [3, 150] / [3, 30] N m/rad (log); ``k_rig`` [20, 1500] / [40, 250] N/m (log);
@@ -223,9 +224,9 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                 for i, xr in enumerate(x_rig):
                     xc = xr
                     if k_rig and xr > 0 and force(xr) > 0:
-                        # series spring: x_rig = x_cane + F(x_cane) / k_rig, monotone in x_cane and
-                        # bracketed by [0, x_rig]; a root bracket, because a fixed-point iteration
-                        # diverges once the cane is more than about 3 times stiffer than the rig
+                        # series spring: x_rig = x_cane + F(x_cane) / k_rig, bracketed by [0, x_rig]
+                        # (F(x_rig) > 0); a root bracket, because a damped fixed-point iteration stops
+                        # converging once the cane is more than 3 times stiffer than the rig
                         xc = brentq(lambda v: v + force(v) / k_rig - xr, 0.0, xr, xtol=1e-12)
                     f = force(xc)
                     x_cane[i], F[i] = xc, f
