@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from scipy.interpolate import CubicSpline
+from scipy.optimize import brentq
 
 from canebench.canes.generate import NU, _digitize, _rig_csv, _truth_curve
 from canebench.model.chain import probe_direction
@@ -91,7 +93,7 @@ def random_strength(name: str, rng: np.random.Generator, strong: bool = False,
     if name == "obstruction":
         return {"fraction": 0.25}
     if name == "lateral_support":
-        return {"height_frac": float(rng.uniform(0.3, 0.55)), "k_support": float(np.exp(rng.uniform(np.log(20), np.log(200))))}
+        return {"height_frac": u(0.3, 0.55), "k_support": u(20.0, 200.0, log=True)}
     raise KeyError(name)
 
 
@@ -193,9 +195,6 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                     if f / GF_TO_N >= 1600.0 or x > 0.5e-3 * MAX_SAMPLES + 0.02:
                         break
                 xs, fs = np.array(xs), np.array(fs)
-                from scipy.interpolate import CubicSpline
-                from scipy.optimize import brentq
-
                 Fcane = CubicSpline(xs, fs)
                 k_lin = rod.linear_stiffness()
 
@@ -215,7 +214,6 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                 k_obs = rng.uniform(2.0, 8.0) * k_lin if obstructed else 0.0
                 # the rig's travel after contact at 0.5 mm steps
                 x_rig = delta0 + 0.5e-3 * np.arange(MAX_SAMPLES - n_dead)
-                x_cane = x_rig.copy()
                 F = np.zeros_like(x_rig)
 
                 def force(xc: float) -> float:
@@ -229,7 +227,7 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                         # converging once the cane is more than 3 times stiffer than the rig
                         xc = brentq(lambda v: v + force(v) / k_rig - xr, 0.0, xr, xtol=1e-12)
                     f = force(xc)
-                    x_cane[i], F[i] = xc, f
+                    F[i] = f
                     if f / GF_TO_N >= 1000.0:
                         F = F[: i + 1]
                         break

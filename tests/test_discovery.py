@@ -614,8 +614,8 @@ def test_a_rig_softer_than_the_cane_gives_a_smooth_trace(tmp_path):
     self-test's range: 20 N/m, beside canes up to ten times stiffer. The readings' second
     differences carry the load cell's noise (sigma <= 3 gf, so sd <= 3 sqrt(6) = 7.3 gf), the
     preload step at contact (<= 15 gf) and the trace's own bend; 40 gf is 5.5 of those sd. A
-    damped fixed-point solve of the series equation diverges once the cane is more than 3
-    times stiffer than the rig, and wrote swings of 100 gf between samples here."""
+    damped fixed-point solve of the series equation stops converging once the cane is more
+    than 3 times stiffer than the rig, and wrote swings of 100 gf between samples here."""
     from canebench.canes.generate_hidden import generate_hidden
 
     d = generate_hidden(tmp_path / "rig", 8010, {"rig_compliance": {"k_rig": 20.0}}, n_bushes=2)
