@@ -167,3 +167,41 @@ def test_thresholds_apply_to_tared_contact_force(tmp_path):
     rows = [f"{i + 2},{500 * i},{30.0 + max(0, i - 5) * 0.4},{0.5 * i},700" for i in range(40)]
     ff = extract_field_stiffness(read_rig_csv(_write(tmp_path, HEADER + "\n".join(rows) + "\n")))
     assert not ff.usable and "20 gf after taring" in ff.reason
+
+
+def _write_long_trial(folder: Path, travel_mm: float) -> Path:
+    """A one-trial dataset whose cane stiffens threefold after 45 mm of contact (noise-free)."""
+    (folder / "trials").mkdir(parents=True)
+    x_contact = 10.0  # mm of free travel before contact
+    disp = np.arange(0.0, x_contact + travel_mm + 1e-9, 0.5)
+    u = np.clip(disp - x_contact, 0.0, None)
+    force = 3.0 * np.minimum(u, 45.0) + 9.0 * np.clip(u - 45.0, 0.0, None)  # gf: 3 gf/mm, then 12 gf/mm
+    rows = ["Iteration,Time Stamp,Load Cell Reading (gf),Displacement (mm),Height (mm)"]
+    rows += [f"{i},{(500 * i) % 32768},{-50.0 + f:.2f},{100.0 + d:.1f},800" for i, (d, f) in enumerate(zip(disp, force))]
+    (folder / "trials" / "t.csv").write_text("\n".join(rows) + "\n")
+    (folder / "push_points.csv").write_text("bush,cane,trial,height_mm,diameter_mm,file\n1,1,1,800,6.0,trials/t.csv\n")
+    return folder
+
+
+def test_a_trace_longer_than_the_simulated_push_is_scored_over_the_push(tmp_path):
+    """The simulation pushes at most 90 steps of 0.5 mm (45 mm of contact); a rig trace that runs
+    to 80 mm is fitted over its first 45 mm so both sides score the same push. The trace here
+    rises 3 gf/mm for 45 mm and 12 gf/mm after it: over 45 mm the slope is 3 gf/mm (the hinge
+    onset may take a sample, hence 2 %); over all 80 mm it would be about 4.9 gf/mm. A trace
+    within 45 mm is fitted over all of it, as before."""
+    from canebench.data.dataset import load_dataset
+    from canebench.execute.pipeline import SIM_TRAVEL_MM, field_stage
+    from canebench.probe.protocol import PROTOCOLS
+    from canebench.units import GF_TO_N
+
+    assert SIM_TRAVEL_MM == PROTOCOLS["fast"].max_steps * PROTOCOLS["fast"].step_m * 1e3 == 45.0
+    long = load_dataset(_write_long_trial(tmp_path / "long", 80.0))
+    fr = field_stage(long)[long[0].id]
+    assert fr.fit.usable
+    assert fr.k == pytest.approx(3.0 * GF_TO_N, rel=0.02)
+    full = extract_field_stiffness(read_rig_csv(long[0].csv))
+    assert full.k_n_per_mm > 1.4 * fr.k  # the premise: the unwindowed fit is another slope
+    assert fr.n_steps(PROTOCOLS["fast"]) == PROTOCOLS["fast"].max_steps
+    short = load_dataset(_write_long_trial(tmp_path / "short", 40.0))
+    fs = field_stage(short)[short[0].id]
+    assert fs.k == extract_field_stiffness(read_rig_csv(short[0].csv)).k_n_per_mm

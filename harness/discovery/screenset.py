@@ -15,6 +15,16 @@ engine's answer exactly; away from it only the change in compliance is
 linearized. The workflow re-anchors on the engine after every effect it
 names, so a second effect is never asked to absorb the first one's
 linearization error.
+
+One nonlinearity the anchor cannot carry is the probe's pitch. A probe pitched
+up pulls the cane along its axis as it pushes it sideways, and tension
+stiffens a bending rod (pitched down, compression softens it): on 1000 gf
+traces of thin canes that adds 0.1-0.2 in ln k to the 1/cos^2 the linear
+screen gives a pitch of 30 degrees, and it has a sign the screen's quadratic
+form in the pitch does not. So the workflow runs the baseline engine at a
+few pitches (:data:`PITCH_GRID_DEG`) and the screen adds, per trial, the
+engine's excess over its own prediction there, interpolated in the pitch
+(:meth:`ScreenSet.with_pitch_table`).
 """
 
 from __future__ import annotations
@@ -35,6 +45,10 @@ _OFF_ANCHOR = "off the anchor's geometry"
 CALIPER_SIGMA_DEFAULT_M = 0.25e-3
 #: floor of the estimated scatter: readings rounded to 0.1 mm scatter by 0.03 mm from rounding alone
 CALIPER_SIGMA_FLOOR_M = 0.05e-3
+#: extra probe pitches (deg) at which the baseline engine is run to tabulate each trial's nonlinear
+#: response to the pitch (0 is the baseline run itself); the probe_misalignment parameter's bounds
+#: are +-45, so the interpolant extrapolates by at most 5 degrees
+PITCH_GRID_DEG = (-40.0, -20.0, 0.0, 20.0, 40.0)
 
 
 def caliper_sigma(geoms: list[TrialGeometry]) -> float:
@@ -92,6 +106,12 @@ class ScreenSet:
     cal_line: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the caliper-fit line there
     cal_w: np.ndarray = field(default_factory=lambda: np.zeros(0))
     cal_sigma: float = CALIPER_SIGMA_DEFAULT_M
+    #: (n, len(PITCH_GRID_DEG)) coefficients (highest power first, pitch in rad) of each trial's
+    #: engine-minus-screen ln k as a function of the extra probe pitch, zero at zero pitch; an
+    #: empty array: no table (the screen alone)
+    pitch_coef: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    #: the extra probe pitch (deg) of the anchor's model
+    anchor_pitch_deg: float = 0.0
 
     @classmethod
     def build(cls, geoms: list[TrialGeometry]) -> "ScreenSet":
@@ -131,14 +151,40 @@ class ScreenSet:
                          self.s[pts], self.w[pts], self.d0[pts], self.kaa[pts], self.kae[pts], self.kee[pts],
                          self.raa[keep], self.rae[keep], self.ree[keep], self.E[keep], self.th0[keep], self.min_d,
                          self.c0[keep], self.s0, self.anchor, new_index[self.cal_idx[cal]], self.cal_s[cal],
-                         self.cal_line[cal], self.cal_w[cal], self.cal_sigma)
+                         self.cal_line[cal], self.cal_w[cal], self.cal_sigma,
+                         self.pitch_coef[keep] if self.pitch_coef.size else self.pitch_coef,
+                         self.anchor_pitch_deg)
 
     def anchored(self, specs: tuple[EffectSpec, ...]) -> "ScreenSet":
         """The same trials, with predictions relative to an engine run of the model ``specs``."""
         from dataclasses import replace
 
-        cc, series = self.compliance(AppliedEffects([s.instance() for s in specs]))
-        return replace(self, c0=cc, s0=series, anchor=tuple(specs))
+        fx = AppliedEffects([s.instance() for s in specs])
+        cc, series = self.compliance(fx)
+        return replace(self, c0=cc, s0=series, anchor=tuple(specs), anchor_pitch_deg=fx.probe_pitch_deg())
+
+    def with_pitch_table(self, table: np.ndarray) -> "ScreenSet":
+        """The same screen with each trial's engine excess at the pitches :data:`PITCH_GRID_DEG`.
+
+        ``table[i, j]``: the engine's ln k of trial i with the probe pitched by an extra
+        ``PITCH_GRID_DEG[j]`` minus this screen's prediction of it from the baseline (0 at 0).
+        It is interpolated by the polynomial through the grid's points (smooth, so the fit's
+        optimizer sees no kinks). A trial the engine failed on at any pitch gets no correction.
+        """
+        from dataclasses import replace
+
+        table = np.asarray(table, float)
+        x = np.deg2rad(np.asarray(PITCH_GRID_DEG))
+        coef = np.linalg.solve(np.vander(x, len(x)), np.nan_to_num(table, nan=0.0).T).T
+        coef[~np.all(np.isfinite(table), axis=1)] = 0.0
+        return replace(self, pitch_coef=coef)
+
+    def pitch_excess(self, pitch_deg: float) -> np.ndarray | float:
+        """Each trial's tabulated engine-minus-screen ln k at an extra probe pitch (0 without a table)."""
+        if not self.pitch_coef.size:
+            return 0.0
+        x = np.deg2rad(pitch_deg)
+        return self.pitch_coef @ (x ** np.arange(self.pitch_coef.shape[1] - 1, -1, -1))
 
     def with_diameters(self, d0: np.ndarray) -> "ScreenSet":
         """The same trials on other caliper-fit diameters ``d0`` (one per quadrature point).
@@ -202,6 +248,8 @@ def predict_log_k(ss: ScreenSet, log_k_base: np.ndarray, specs: tuple[EffectSpec
     cc, series = ss.compliance(fx)
     # stiffness is in N/mm throughout the harness; the series compliance comes in m/N
     cane = np.exp(-log_k_base) - ss.s0 * M_PER_N_TO_MM_PER_N
-    inv = cane * (cc / ss.c0) + series * M_PER_N_TO_MM_PER_N
+    # the pitch's nonlinearity (tension or compression along the cane) acts on the cane, not the rig
+    excess = ss.pitch_excess(fx.probe_pitch_deg()) - ss.pitch_excess(ss.anchor_pitch_deg)
+    inv = cane * (cc / ss.c0) * np.exp(-excess) + series * M_PER_N_TO_MM_PER_N
     with np.errstate(divide="ignore", invalid="ignore"):
         return -np.log(inv)

@@ -70,7 +70,7 @@ from .adequacy import geometry_draws, level_trend_geometry
 from .fit import Candidate, bootstrap_ci, cross_validate, direction_test_p, fit_candidate, sign_flip_p
 from .onsets import detect_early_contact, detect_onset
 from .screen import trial_geometry
-from .screenset import ScreenSet, predict_log_k
+from .screenset import PITCH_GRID_DEG, ScreenSet, predict_log_k
 from .structure import between_share, level_trend, structure_tests
 
 BASELINES = {
@@ -128,6 +128,8 @@ class DiscoveryResult:
     partial: list[dict[str, Any]] = field(default_factory=list)
     #: that account as a model (``model_partial.yaml``), None when nothing was withheld
     partial_config: ModelConfig | None = None
+    #: the baseline engine's nonlinear excess over the screen at extra probe pitches (:func:`_pitch_table`)
+    pitch_table: dict[str, Any] = field(default_factory=dict)
 
     def to_df(self) -> pd.DataFrame:
         return self.trials
@@ -146,7 +148,8 @@ class DiscoveryResult:
                 "notes": self.notes,
                 # NaN (a column a row does not have) as null: strict JSON
                 "selection": self.steps.astype(object).where(self.steps.notna(), None).to_dict("records"),
-                "anchors": self.anchors, "adequacy": self.adequacy, "timing_s": self.timing,
+                "anchors": self.anchors, "pitch_table": self.pitch_table, "adequacy": self.adequacy,
+                "timing_s": self.timing,
                 "between_cane_share": {"before": between_share(self.trials, "r_before"),
                                        "after_cv": between_share(self.trials, "r_after_cv")}}
 
@@ -357,6 +360,12 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     timing["screen_build_s"] = time.perf_counter() - t2
     notes.append(f"calipers: readings scatter {1e3 * ss.cal_sigma:.2f} mm about each cane's fitted line (pooled); "
                  f"a diameter effect's change at the calipers is scored against it, so a flare stays below them")
+    pitch_table: dict[str, Any] = {}
+    if "probe_misalignment" in candidates:
+        t_p = time.perf_counter()
+        ss, pitch_table = _pitch_table(trials, F, ss, lkb, base_backend, proto, cfg0, obstruction, outp,
+                                       executor, progress)
+        timing["pitch_table_s"] = time.perf_counter() - t_p
 
     # -- selection
     t3 = time.perf_counter()
@@ -586,7 +595,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             "screen_vs_engine_max", "linear_screen_vs_engine_max")}} for r in engines.itertuples()}
     timing["total_s"] = time.perf_counter() - t_start
     result = DiscoveryResult(baseline, named, unexplained, gap, feats, pd.DataFrame(steps), sb, sa, model, engines,
-                             stop, notes, timing, anchors, adequacy, partial, partial_config)
+                             stop, notes, timing, anchors, adequacy, partial, partial_config,
+                             pitch_table)
     result.notes.append(f"baseline: {base_text}")
     if any(t.cane.provenance.get("assumptions") for t in trials):
         for a in dict.fromkeys(a for t in trials for a in t.cane.provenance.get("assumptions", [])):
@@ -640,6 +650,35 @@ def _reanchor(trials, F, ss, lka, cv_cur, lkf, backend, proto, cfg0, obstruction
         if move < xtol:
             break
     return ss, lka, cv_cur
+
+
+def _pitch_table(trials, F, ss, lkb, backend, proto, cfg0, obstruction, outp, executor, progress):
+    """Run the baseline engine at the extra probe pitches :data:`PITCH_GRID_DEG`; the screen with
+    each trial's engine-minus-screen ln k there (:meth:`ScreenSet.with_pitch_table`).
+
+    A pitched probe loads the cane along its axis as well (tension pitched up, compression
+    down), which stiffens or softens it beyond the linear screen's 1/cos^2; without the table
+    a 30 degree pitch on 1000 gf traces was fitted as -37.5 degrees and lost to a modulus
+    scale (both level shifts to the linear screen). Cost: one baseline run per extra pitch.
+    """
+    keep = {t: i for i, t in enumerate(F.trial)}
+    sub = [t for t in trials if t.id in keep]
+    table = np.zeros((len(F), len(PITCH_GRID_DEG)))
+    for j, pitch in enumerate(PITCH_GRID_DEG):
+        if pitch == 0.0:
+            continue
+        spec = EffectSpec("probe_misalignment", (("angle_deg", float(pitch)),))
+        cfg = cfg0.replace(effects=(spec,) + obstruction)
+        res = run_trials(sub, [backend], proto, cfg, outp / f"pitch_{pitch:+.0f}" if outp else None,
+                         executor=executor, progress=progress).to_df()
+        table[:, j] = _ok_log_k(res, backend, F.trial) - predict_log_k(ss, lkb, (spec,))
+    failed = ~np.all(np.isfinite(table), axis=1)
+    summary = {"grid_deg": list(PITCH_GRID_DEG), "engine": backend, "n_failed": int(failed.sum()),
+               "median_engine_minus_screen": [float(np.median(c[np.isfinite(c)])) if np.isfinite(c).any()
+                                              else math.nan for c in table.T],
+               "max_abs_engine_minus_screen": [float(np.max(np.abs(c[np.isfinite(c)]))) if np.isfinite(c).any()
+                                               else math.nan for c in table.T]}
+    return ss.with_pitch_table(table), summary
 
 
 def _confirm(trials, backends, proto, cfg_b, model, F, ss, lka, lkb0, final, outp, executor,
