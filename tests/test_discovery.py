@@ -975,3 +975,12 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     eng_b = _ok_log_k(run_trials(trials, [backend], proto, cfg0.replace(effects=(b,)), None,
                                  executor=ex).to_df(), backend, F.trial)
     assert np.max(np.abs(eng_b - predict_log_k(ss_a, lka, (b,)))) < 0.01
+    # cross-validation folds and bootstrap resamples carry each trial's own row of the table
+    from canebench.discovery.fit import _take
+
+    full = predict_log_k(ss_a, lka, (b,))
+    keep = np.arange(len(trials)) % 3 != 0
+    assert np.array_equal(predict_log_k(ss_a.subset(keep), lka[keep], (b,)), full[keep])
+    rows = np.array([5, 5, 0, 11])
+    assert np.array_equal(predict_log_k(_take(ss_a, rows, np.array(["a", "a", "b", "c"])), lka[rows], (b,)),
+                          full[rows])

@@ -202,6 +202,14 @@ def test_a_trace_longer_than_the_simulated_push_is_scored_over_the_push(tmp_path
     full = extract_field_stiffness(read_rig_csv(long[0].csv))
     assert full.k_n_per_mm > 1.4 * fr.k  # the premise: the unwindowed fit is another slope
     assert fr.n_steps(PROTOCOLS["fast"]) == PROTOCOLS["fast"].max_steps
+    assert any("longer than the simulated push" in f for f in fr.fit.flags)
+    # the elbow at 45 mm changes no scored slope, so discovery must not name an obstruction there
+    # (on the whole trace the onset detector finds it, signal to noise 93)
+    from canebench.discovery.onsets import detect_onset
+    from canebench.discovery.workflow import field_onsets
+
+    assert detect_onset(fr.fit.displacement_mm, fr.fit.force_n) is not None
+    assert field_onsets({long[0].id: fr}) == {}
     short = load_dataset(_write_long_trial(tmp_path / "short", 40.0))
     fs = field_stage(short)[short[0].id]
     assert fs.k == extract_field_stiffness(read_rig_csv(short[0].csv)).k_n_per_mm

@@ -18,10 +18,13 @@ linearization error.
 
 One nonlinearity the anchor cannot carry is the probe's pitch. A probe pitched
 up pulls the cane along its axis as it pushes it sideways, and tension
-stiffens a bending rod (pitched down, compression softens it): on 1000 gf
-traces of thin canes that adds 0.1-0.2 in ln k to the 1/cos^2 the linear
-screen gives a pitch of 30 degrees, and it has a sign the screen's quadratic
-form in the pitch does not. So the workflow runs the baseline engine at a
+stiffens a bending rod (pitched down, compression softens it): beside the
+1/cos^2 the linear screen gives, the beam adds up to 0.07 in ln k at 30
+degrees on the bundled canes and up to 0.3 at 40 degrees on thinner ones,
+with a sign the screen's quadratic form in the pitch does not have. The
+table is measured on the baseline model and reused as it is when other
+effects are in the model (re-anchoring on the engine corrects the model
+held, not the candidates tried beside it). So the workflow runs the baseline engine at a
 few pitches (:data:`PITCH_GRID_DEG`) and the screen adds, per trial, the
 engine's excess over its own prediction there, interpolated in the pitch
 (:meth:`ScreenSet.with_pitch_table`).

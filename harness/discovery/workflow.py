@@ -60,7 +60,7 @@ import pandas as pd
 
 from ..data.dataset import Trial
 from ..data.rig import read_rig_csv
-from ..execute.pipeline import field_stage
+from ..execute.pipeline import SIM_TRAVEL_MM, field_stage
 from ..execute.runner import run_trials
 from ..model.config import ModelConfig
 from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
@@ -303,12 +303,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
 
     # -- field, obstruction onsets
     fields0 = field_stage(trials, proto.fit_window_mm)
-    onsets: dict[str, float] = {}
-    for tid, fr in fields0.items():
-        if fr.fit is not None and fr.fit.usable and fr.fit.displacement_mm is not None:
-            o = detect_onset(fr.fit.displacement_mm, fr.fit.force_n)
-            if o is not None:
-                onsets[tid] = o.onset_mm
+    onsets = field_onsets(fields0)
     # a soft contact the field stage took for the tare: its knee is the obstruction's onset, and
     # its stiffness the obstruction's; such trials cannot be scored and are left out of the fit
     early: dict[str, Any] = {}
@@ -361,11 +356,15 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     notes.append(f"calipers: readings scatter {1e3 * ss.cal_sigma:.2f} mm about each cane's fitted line (pooled); "
                  f"a diameter effect's change at the calipers is scored against it, so a flare stays below them")
     pitch_table: dict[str, Any] = {}
+    ss_lin = ss  # the linear screen alone (the confirmation's diagnostic)
     if "probe_misalignment" in candidates:
         t_p = time.perf_counter()
         ss, pitch_table = _pitch_table(trials, F, ss, lkb, base_backend, proto, cfg0, obstruction, outp,
                                        executor, progress)
         timing["pitch_table_s"] = time.perf_counter() - t_p
+        if pitch_table["n_failed"]:
+            notes.append(f"pitch table: the engine failed on {pitch_table['n_failed']} trial(s) at some pitch; "
+                         "those trials' pitch is screened linearly (1/cos^2 only)")
 
     # -- selection
     t3 = time.perf_counter()
@@ -588,7 +587,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         # with the names withheld the engines run the library's best account: what it would do on
         # every engine is worth seeing; the named model's "after" is the "before"
         engines = _confirm(trials, backends or [base_backend], proto, cfg_b, partial_config or model, F, ss, lka,
-                           lkb0, final, outp, executor, progress, ss0)
+                           lkb0, final, outp, executor, progress, ss_lin)
         timing["confirm_s"] = time.perf_counter() - t5
         gap["per_backend"] = {r.backend: {"model": "partial" if partial else "named", **{k: getattr(r, k) for k in (
             "before_median", "before_worst", "after_median", "after_worst", "after_cv_median", "after_cv_worst",
@@ -652,6 +651,23 @@ def _reanchor(trials, F, ss, lka, cv_cur, lkf, backend, proto, cfg0, obstruction
     return ss, lka, cv_cur
 
 
+def field_onsets(fields: dict) -> dict[str, float]:
+    """Obstruction onsets (mm after contact) in the field traces, by trial id.
+
+    Only the push the simulation makes is searched (its first :data:`SIM_TRAVEL_MM` of contact,
+    the whole trace wherever contact ends within it, as every real trace does): an elbow past
+    it changes no slope on either side, so it names nothing.
+    """
+    onsets: dict[str, float] = {}
+    for tid, fr in fields.items():
+        if fr.fit is not None and fr.fit.usable and fr.fit.displacement_mm is not None:
+            within = fr.fit.displacement_mm <= SIM_TRAVEL_MM
+            o = detect_onset(fr.fit.displacement_mm[within], fr.fit.force_n[within])
+            if o is not None:
+                onsets[tid] = o.onset_mm
+    return onsets
+
+
 def _pitch_table(trials, F, ss, lkb, backend, proto, cfg0, obstruction, outp, executor, progress):
     """Run the baseline engine at the extra probe pitches :data:`PITCH_GRID_DEG`; the screen with
     each trial's engine-minus-screen ln k there (:meth:`ScreenSet.with_pitch_table`).
@@ -673,11 +689,12 @@ def _pitch_table(trials, F, ss, lkb, backend, proto, cfg0, obstruction, outp, ex
                          executor=executor, progress=progress).to_df()
         table[:, j] = _ok_log_k(res, backend, F.trial) - predict_log_k(ss, lkb, (spec,))
     failed = ~np.all(np.isfinite(table), axis=1)
+    # None where the engine failed on every trial at a pitch: discovery.json is strict JSON
     summary = {"grid_deg": list(PITCH_GRID_DEG), "engine": backend, "n_failed": int(failed.sum()),
                "median_engine_minus_screen": [float(np.median(c[np.isfinite(c)])) if np.isfinite(c).any()
-                                              else math.nan for c in table.T],
+                                              else None for c in table.T],
                "max_abs_engine_minus_screen": [float(np.max(np.abs(c[np.isfinite(c)]))) if np.isfinite(c).any()
-                                               else math.nan for c in table.T]}
+                                               else None for c in table.T]}
     return ss.with_pitch_table(table), summary
 
 

@@ -122,6 +122,8 @@ def field_stage(trials: Iterable[Trial], window_mm: float | None = None,
     """Field stiffness of every trial, by trial id (a bad CSV is a reason, not a crash).
 
     ``window_mm`` must be the protocol's ``fit_window_mm`` so both sides of a score use one window;
+    a trace whose contact runs past :data:`SIM_TRAVEL_MM` (the registered protocols' push) is fitted
+    over that much of it (flagged);
     a ``config`` whose effects shorten a trial's window (an obstruction onset)
     shortens it here too, as :func:`run_job` does for the simulation.
 
@@ -143,6 +145,8 @@ def field_stage(trials: Iterable[Trial], window_mm: float | None = None,
                 and len(ff.displacement_mm) and float(np.max(ff.displacement_mm)) > SIM_TRAVEL_MM):
             # longer than any simulated push: score the part the simulation covers
             ff = field_fit_for(t, SIM_TRAVEL_MM)
+            if ff is not None:
+                ff.flags.append(f"contact longer than the simulated push: fitted over its first {SIM_TRAVEL_MM:g} mm")
         out[t.id] = FieldResult(t, ff, ff.reason if ff is not None else "no field trial")
     return out
 
