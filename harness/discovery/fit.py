@@ -362,7 +362,7 @@ def _take(ss: ScreenSet, rows: np.ndarray, labels: np.ndarray) -> ScreenSet:
                      ss.kaa[pts], ss.kae[pts], ss.kee[pts], ss.raa[rows], ss.rae[rows], ss.ree[rows], ss.E[rows],
                      ss.th0[rows], ss.min_d, ss.c0[rows], ss.s0, ss.anchor, cidx, ss.cal_s[cpts],
                      ss.cal_line[cpts], ss.cal_w[cpts], ss.cal_sigma,
-                     ss.pitch_coef[rows] if ss.pitch_coef.size else ss.pitch_coef, ss.anchor_pitch_deg)
+                     ss.pitch_rows(rows), ss.anchor_pitch_deg)
 
 
 def _gather(owner: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -21,13 +21,13 @@ up pulls the cane along its axis as it pushes it sideways, and tension
 stiffens a bending rod (pitched down, compression softens it): beside the
 1/cos^2 the linear screen gives, the beam adds up to 0.07 in ln k at 30
 degrees on the bundled canes and up to 0.3 at 40 degrees on thinner ones,
-with a sign the screen's quadratic form in the pitch does not have. The
+with a sign the screen's quadratic form in the pitch does not have. So the
+workflow runs the baseline engine at a few pitches (:data:`PITCH_GRID_DEG`)
+and the screen adds, per trial, the engine's excess over its own prediction
+there, interpolated in the pitch (:meth:`ScreenSet.with_pitch_table`). The
 table is measured on the baseline model and reused as it is when other
 effects are in the model (re-anchoring on the engine corrects the model
-held, not the candidates tried beside it). So the workflow runs the baseline engine at a
-few pitches (:data:`PITCH_GRID_DEG`) and the screen adds, per trial, the
-engine's excess over its own prediction there, interpolated in the pitch
-(:meth:`ScreenSet.with_pitch_table`).
+held, not the candidates tried beside it).
 """
 
 from __future__ import annotations
@@ -154,9 +154,12 @@ class ScreenSet:
                          self.s[pts], self.w[pts], self.d0[pts], self.kaa[pts], self.kae[pts], self.kee[pts],
                          self.raa[keep], self.rae[keep], self.ree[keep], self.E[keep], self.th0[keep], self.min_d,
                          self.c0[keep], self.s0, self.anchor, new_index[self.cal_idx[cal]], self.cal_s[cal],
-                         self.cal_line[cal], self.cal_w[cal], self.cal_sigma,
-                         self.pitch_coef[keep] if self.pitch_coef.size else self.pitch_coef,
+                         self.cal_line[cal], self.cal_w[cal], self.cal_sigma, self.pitch_rows(keep),
                          self.anchor_pitch_deg)
+
+    def pitch_rows(self, rows: np.ndarray) -> np.ndarray:
+        """The pitch table's rows of the trials ``rows`` (a mask or indices; empty without a table)."""
+        return self.pitch_coef[rows] if self.pitch_coef.size else self.pitch_coef
 
     def anchored(self, specs: tuple[EffectSpec, ...]) -> "ScreenSet":
         """The same trials, with predictions relative to an engine run of the model ``specs``."""

@@ -355,8 +355,10 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     timing["screen_build_s"] = time.perf_counter() - t2
     notes.append(f"calipers: readings scatter {1e3 * ss.cal_sigma:.2f} mm about each cane's fitted line (pooled); "
                  f"a diameter effect's change at the calipers is scored against it, so a flare stays below them")
+    # the baseline engine's answer (the "before") and the linear screen alone; lkb, ss follow the
+    # anchor, and ss carries the pitch table
+    lkb0, ss0 = lkb, ss
     pitch_table: dict[str, Any] = {}
-    ss_lin = ss  # the linear screen alone (the confirmation's diagnostic)
     if "probe_misalignment" in candidates:
         t_p = time.perf_counter()
         ss, pitch_table = _pitch_table(trials, F, ss, lkb, base_backend, proto, cfg0, obstruction, outp,
@@ -368,7 +370,6 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
 
     # -- selection
     t3 = time.perf_counter()
-    lkb0, ss0 = lkb, ss  # the baseline engine's answer (the "before") and its screen; lkb, ss follow the anchor
     current: tuple[str, ...] = ()
     removed: list[str] = []  # named, then found stale by the backward pass
     # models the search has held: a forward step may not return to one, so an effect dropped as
@@ -587,7 +588,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         # with the names withheld the engines run the library's best account: what it would do on
         # every engine is worth seeing; the named model's "after" is the "before"
         engines = _confirm(trials, backends or [base_backend], proto, cfg_b, partial_config or model, F, ss, lka,
-                           lkb0, final, outp, executor, progress, ss_lin)
+                           lkb0, final, outp, executor, progress, ss0)
         timing["confirm_s"] = time.perf_counter() - t5
         gap["per_backend"] = {r.backend: {"model": "partial" if partial else "named", **{k: getattr(r, k) for k in (
             "before_median", "before_worst", "after_median", "after_worst", "after_cv_median", "after_cv_worst",
@@ -617,14 +618,10 @@ def _reanchor(trials, F, ss, lka, cv_cur, lkf, backend, proto, cfg0, obstruction
     predictions share its linearization point (a second-order leak: the point moves the
     prediction only through the screen's curvature).
     """
-    keep = {t: i for i, t in enumerate(F.trial)}
-    sub = [t for t in trials if t.id in keep]
     for it in range(1, max_runs + 1):
         specs = tuple(cv_cur.fit.specs)
-        cfg = cfg0.replace(effects=specs + obstruction)
-        res = run_trials(sub, [backend], proto, cfg, outp / f"anchor_{round_no}_{it}" if outp else None,
-                         executor=executor, progress=progress).to_df()
-        lk_eng = _ok_log_k(res, backend, F.trial)
+        lk_eng = _engine_log_k(trials, F, backend, proto, cfg0, specs + obstruction,
+                               outp / f"anchor_{round_no}_{it}" if outp else None, executor, progress)
         lk_lin = predict_log_k(ss, lka, specs)
         good = np.isfinite(lk_eng)
         dev = lk_eng - lk_lin
@@ -649,6 +646,14 @@ def _reanchor(trials, F, ss, lka, cv_cur, lkf, backend, proto, cfg0, obstruction
         if move < xtol:
             break
     return ss, lka, cv_cur
+
+
+def _engine_log_k(trials, F, backend, proto, cfg0, effects, folder, executor, progress) -> np.ndarray:
+    """ln k of ``backend`` on the scored trials (``F``'s order) with ``effects``; NaN where it failed."""
+    keep = set(F.trial)
+    res = run_trials([t for t in trials if t.id in keep], [backend], proto, cfg0.replace(effects=effects), folder,
+                     executor=executor, progress=progress).to_df()
+    return _ok_log_k(res, backend, F.trial)
 
 
 def field_onsets(fields: dict) -> dict[str, float]:
@@ -677,17 +682,14 @@ def _pitch_table(trials, F, ss, lkb, backend, proto, cfg0, obstruction, outp, ex
     a 30 degree pitch on 1000 gf traces was fitted as -37.5 degrees and lost to a modulus
     scale (both level shifts to the linear screen). Cost: one baseline run per extra pitch.
     """
-    keep = {t: i for i, t in enumerate(F.trial)}
-    sub = [t for t in trials if t.id in keep]
     table = np.zeros((len(F), len(PITCH_GRID_DEG)))
     for j, pitch in enumerate(PITCH_GRID_DEG):
         if pitch == 0.0:
             continue
         spec = EffectSpec("probe_misalignment", (("angle_deg", float(pitch)),))
-        cfg = cfg0.replace(effects=(spec,) + obstruction)
-        res = run_trials(sub, [backend], proto, cfg, outp / f"pitch_{pitch:+.0f}" if outp else None,
-                         executor=executor, progress=progress).to_df()
-        table[:, j] = _ok_log_k(res, backend, F.trial) - predict_log_k(ss, lkb, (spec,))
+        lk_eng = _engine_log_k(trials, F, backend, proto, cfg0, (spec,) + obstruction,
+                               outp / f"pitch_{pitch:+.0f}" if outp else None, executor, progress)
+        table[:, j] = lk_eng - predict_log_k(ss, lkb, (spec,))
     failed = ~np.all(np.isfinite(table), axis=1)
     # None where the engine failed on every trial at a pitch: discovery.json is strict JSON
     summary = {"grid_deg": list(PITCH_GRID_DEG), "engine": backend, "n_failed": int(failed.sum()),

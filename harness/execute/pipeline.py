@@ -114,7 +114,7 @@ SIM_TRAVEL_MM = Protocol.max_steps * Protocol.step_m * 1e3
 def field_fit_for(trial: Trial, window_mm: float | None = None) -> FieldFit | None:
     if trial.csv is None or not trial.csv.exists():
         return None
-    return extract_field_stiffness(read_rig_csv(trial.csv), window_mm=window_mm)
+    return extract_field_stiffness(read_rig_csv(trial.csv), window_mm=window_mm, max_travel_mm=SIM_TRAVEL_MM)
 
 
 def field_stage(trials: Iterable[Trial], window_mm: float | None = None,
@@ -141,12 +141,6 @@ def field_stage(trials: Iterable[Trial], window_mm: float | None = None,
             raise InputError(str(t.csv), "<file>", f"rig CSV of trial {t.id} not found")
         win = config.fit_window_mm(t.cane.id, t.id, window_mm) if config is not None else window_mm
         ff = field_fit_for(t, win)
-        if (ff is not None and (win is None or win > SIM_TRAVEL_MM) and ff.displacement_mm is not None
-                and len(ff.displacement_mm) and float(np.max(ff.displacement_mm)) > SIM_TRAVEL_MM):
-            # longer than any simulated push: score the part the simulation covers
-            ff = field_fit_for(t, SIM_TRAVEL_MM)
-            if ff is not None:
-                ff.flags.append(f"contact longer than the simulated push: fitted over its first {SIM_TRAVEL_MM:g} mm")
         out[t.id] = FieldResult(t, ff, ff.reason if ff is not None else "no field trial")
     return out
 

@@ -103,7 +103,7 @@ def _hinge_onset(x: np.ndarray, y: np.ndarray) -> tuple[int, float]:
 
 
 def extract_field_stiffness(trial: RigTrial, window_mm: float | None = None, n_boot: int = 1000,
-                            seed: int = 0) -> FieldFit:
+                            seed: int = 0, max_travel_mm: float | None = None) -> FieldFit:
     """Field stiffness (N/mm) of one trial; see the module docstring for the steps.
 
     Parameters
@@ -112,6 +112,9 @@ def extract_field_stiffness(trial: RigTrial, window_mm: float | None = None, n_b
         Fit over the first ``window_mm`` of contact only (default: all of it).
     n_boot, seed : int
         Bootstrap replicates and generator seed of the 95 % interval.
+    max_travel_mm : float, optional
+        The push a simulation makes: contact running past it is fitted over its first
+        ``max_travel_mm`` only (flagged), so both sides fit the same push.
     """
     x, f = trial.displacement_mm, trial.force_gf
     flags: list[str] = []
@@ -136,6 +139,10 @@ def extract_field_stiffness(trial: RigTrial, window_mm: float | None = None, n_b
     drops = np.diff(f[keep]) < -30.0
     if drops.any():
         flags.append(f"{int(drops.sum())} force drop(s) > 30 gf (slip or obstruction)")
+    if (max_travel_mm is not None and (window_mm is None or window_mm > max_travel_mm) and len(xs)
+            and float(np.max(xs)) > max_travel_mm):
+        window_mm = max_travel_mm
+        flags.append(f"contact longer than the simulated push: fitted over its first {max_travel_mm:g} mm")
     w = window(xs, window_mm)
     fit = fit_line(xs[w], fs[w])
     f10 = fit_line(xs[window(xs, 10.0)], fs[window(xs, 10.0)])
