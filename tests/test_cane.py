@@ -103,3 +103,7 @@ def test_config_overrides_are_typed_and_validated():
         ModelConfig().with_overrides({"modulus_pa": "soft"})
     with pytest.raises(InputError, match="unknown model setting"):
         ModelConfig().with_overrides({"modulus": "3e9"})
+    assert ModelConfig().with_overrides({"probe_tangent_window_m": "0"}).probe_tangent_window_m == 0.0
+    for bad in ("-0.1", "nan"):
+        with pytest.raises(InputError, match="probe_tangent_window_m"):
+            ModelConfig().with_overrides({"probe_tangent_window_m": bad})

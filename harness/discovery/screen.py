@@ -137,16 +137,10 @@ def trial_geometry(trial, config: ModelConfig) -> TrialGeometry:
     M_root = A0.T @ (np.eye(3) - np.outer(t0, t0)) @ A0
     line = DiameterFit(**chain.meta["diameter_fit"])  # the model's line (diameter factor applied)
     pp = trial.cane.push_point(trial.push_id)
-    t_push = _tangent_at(rod, s_p)
+    t_push = np.array(chain.meta["probe_tangent"], float)  # the chain's own: one probe in both
     cal = chain.meta["calipers"]
     cal_s = np.array(cal["s"], float)
     resid = np.array(cal["diameter"], float) - replace(line, factor=1.0)(cal_s)  # about the unscaled fit
     return TrialGeometry(trial.id, trial.cane.id, s, w, line(s), Mb, Mt, M_root, rod.modulus, rod.poisson_ratio,
                          rod.min_diameter, np.array(pp.direction, float), t_push, cfg.probe_angle_deg, s_p,
                          float(p[2] - P[0][2]), cal_s, resid, line(cal_s))
-
-
-def _tangent_at(rod, s: float) -> np.ndarray:
-    i = int(np.clip(np.searchsorted(rod.s, s, side="right") - 1, 0, len(rod.s) - 2))
-    t = rod.points[i + 1] - rod.points[i]
-    return t / np.linalg.norm(t)

@@ -263,7 +263,8 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
     link = int(np.clip(np.searchsorted(nodes_s, s_push, side="left") - 1, 0, len(nodes_s) - 2))
     point = curve.at(s_push)
     pitch = config.probe_angle_deg + (fx.probe_pitch_deg() if fx is not None else 0.0)
-    u = probe_direction(np.array(pp.direction), curve.tangent(s_push), pitch)
+    t_push = curve.chord_tangent(s_push, config.probe_tangent_window_m)
+    u = probe_direction(np.array(pp.direction), t_push, pitch)
 
     warnings = []
     if clamped:
@@ -274,6 +275,7 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
         "source": src,
         "s_push": s_push,
         "cane_length": curve.length,
+        "probe_tangent": t_push.tolist(),
         "nodes_s": nodes_s.tolist(),
         "diameter_fit": {"s_centroid": fit.s_centroid, "d_centroid": fit.d_centroid, "slope": fit.slope,
                          "factor": fit.factor},

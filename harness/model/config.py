@@ -53,6 +53,12 @@ class ModelConfig:
         Name in :data:`canebench.model.stiffness.FORMULAS` (``paper`` = 2EI/L).
     probe_angle_deg : float
         Probe pitch from perpendicular to the cane (paper's Morris range +-30).
+    probe_tangent_window_m : float
+        Half-width of the arc over which the cane's direction at the push
+        point is taken (a centred chord) for the probe's perpendicular: a
+        clicked polyline's one segment carries its points' noise (about 1
+        degree at 2 mm over 100 mm gaps), which a pitched probe turns into
+        stiffness scatter. 0 takes the segment's own direction.
     gravity : float
         Gravitational acceleration (m/s^2) along -z; MuJoCo's default 9.81 as in the paper.
     chaikin_iterations, chaikin_strength : int, float
@@ -92,6 +98,7 @@ class ModelConfig:
     discretization: str = "greedy"
     stiffness_formula: str = "paper"
     probe_angle_deg: float = 0.0
+    probe_tangent_window_m: float = 0.15
     gravity: float = 9.81
     chaikin_iterations: int = 5
     chaikin_strength: float = 0.35
@@ -136,6 +143,8 @@ class ModelConfig:
             raise InputError(source, "min_segments", "must be >= 1")
         if not (-89.0 < self.probe_angle_deg < 89.0):
             raise InputError(source, "probe_angle_deg", "must be within (-89, 89) degrees")
+        if not (math.isfinite(self.probe_tangent_window_m) and 0.0 <= self.probe_tangent_window_m <= 1.0):
+            raise InputError(source, "probe_tangent_window_m", "must be in [0, 1] m")
         if not (math.isfinite(self.gravity) and self.gravity >= 0):
             raise InputError(source, "gravity", "must be a finite number >= 0")
         if not (0 < self.chaikin_strength <= 0.5):
