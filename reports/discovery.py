@@ -117,6 +117,19 @@ def section(folder: str | Path) -> str:
                   + f"; below p = {ad['alpha']} the model is called incomplete"
                   + ("; it is: its effects are reported as partial, not named" if doc.get("partial") else "")
                   + "</li>")
+    wa = ad.get("within_after_cv") or {}
+    if wa:
+        wb = ad.get("within_before") or {}
+        notes += (f"<li>within canes (held-out residual against push height along each cane, pooled; null: trial "
+                  f"noise and the caliper line's error): r = {wb.get('r', float('nan')):.2f} (p = "
+                  f"{wb.get('p', float('nan')):.2g}) before, r = {wa['r']:.2f} (p = {wa['p']:.2g}) after; below "
+                  f"p = {ad['alpha']} the model is called incomplete</li>")
+    sh = ad.get("shape") or {}
+    if sh.get("p") is not None:
+        notes += (f"<li>shape check (the traces' stiffening over the push, kappa): the fitted model changes it by "
+                  f"{sh['predicted_mean']:+.3f} on average (spread {sh['predicted_spread']:.3f} across "
+                  f"{sh['n_trials']} trials); the traces show {sh['beta']:.2f} of that change; p = {sh['p']:.2g} "
+                  f"against {sh['share']:.2g} of it (below {ad['alpha']} the model is called incomplete)</li>")
     if "partial_after_cv" in g:
         notes += (f"<li>the partial model's gap, out of sample: median {g['partial_after_cv']['median_abs_log_ratio']:.3f}"
                   f" (worst {g['partial_after_cv']['worst_abs_log_ratio']:.3f}); model_partial.yaml holds it</li>")
@@ -126,7 +139,7 @@ def section(folder: str | Path) -> str:
 {g['before']['median_abs_log_ratio']:.3f} (worst {g['before']['worst_abs_log_ratio']:.3f}) before;
 {g['after_cv']['median_abs_log_ratio']:.3f} (worst {g['after_cv']['worst_abs_log_ratio']:.3f}) after, out of sample
 (leave one cane out). Share of the residual variance between canes: {bs.get('before', float('nan')):.2f} before,
-{bs.get('after_cv', float('nan')):.2f} after{' (the partial model)' if doc.get('partial') else ''}. Unexplained (residual structure, or a model that does not scale across canes as the data do): <b>{doc['unexplained']}</b>.
+{bs.get('after_cv', float('nan')):.2f} after{' (the partial model)' if doc.get('partial') else ''}. Unexplained (residual structure, or a model that does not scale across canes, or bend the traces, as the data do): <b>{doc['unexplained']}</b>.
 Selection stopped: {html.escape(doc.get('stop_reason', ''))}.</p>
 <table><tr><th>named effect</th><th>scope</th><th>parameters (95 % cane-bootstrap interval)</th></tr>{''.join(rows) or '<tr><td colspan=3>nothing named</td></tr>'}</table>
 {eng}

@@ -60,7 +60,7 @@ def main(a: argparse.Namespace) -> int:
     for n in doc["notes"]:
         print(f"  {n}")
     for n in doc["named"] + doc.get("partial", []):
-        what = "named" if n in doc["named"] else "partial (not named: the model does not scale as the data)"
+        what = "named" if n in doc["named"] else "partial (not named: the model does not fit the data's scaling or shape)"
         if n["effect"] == "obstruction":
             print(f"  named: obstruction in {n['n_trials']} trial(s): "
                   + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" for t, v in n["local"].items()))
@@ -69,8 +69,8 @@ def main(a: argparse.Namespace) -> int:
                 f"{k} = {v:.4g} {n['units'].get(k, '')} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}]"
                 for k, v in n["params"].items()))
     if doc.get("partial") and not any(n["scope"] == "global" for n in doc["named"]):
-        print("  named: nothing; the library's best account (partial, above) does not scale across canes as the "
-              "data do")
+        print("  named: nothing; the library's best account (partial, above) does not scale across canes, or bend "
+              "the traces, as the data do")
     elif not doc["named"]:
         print("  named: nothing in the library explains the residual significantly")
     print(f"  stopped: {doc['stop_reason']}")
@@ -89,6 +89,19 @@ def main(a: argparse.Namespace) -> int:
         print(f"  adequacy (held-out residual vs the model's stiffness level, between {ad['n_canes']} canes): "
               f"r = {ad['r']:.2f} (the calipers' own error alone: {ad.get('null_median', float('nan')):.2f}), "
               f"p = {ad['p']:.3g} (alpha {doc['adequacy']['alpha']})")
-    print(f"  unexplained (residual structure, or a model that does not scale as the data): {doc['unexplained']}")
+    wa = doc.get("adequacy", {}).get("within_after_cv")
+    if wa:
+        print(f"  within canes (held-out residual vs push height, {wa['n_canes']} canes): r = {wa['r']:.2f} "
+              f"(null spread +-{2 * wa['null_sd']:.2f}), p = {wa['p']:.3g} (alpha {doc['adequacy']['alpha']})")
+    sh = doc.get("adequacy", {}).get("shape") or {}
+    if sh.get("p") is not None:
+        print(f"  shape (stiffening over the push): the model changes it by {sh['predicted_mean']:+.3f} (spread "
+              f"{sh['predicted_spread']:.3f}), the traces show {sh['beta']:.2f} of that; p = {sh['p']:.3g} against "
+              f"{sh['share']:.2g} of it (alpha {doc['adequacy']['alpha']})")
+    elif sh.get("predicted_spread") is not None:
+        print(f"  shape: the model barely changes the traces' stiffening (spread {sh['predicted_spread']:.3f}); "
+              "nothing to check")
+    print(f"  unexplained (residual structure, or a model that does not fit the data's scaling or shape): "
+          f"{doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")
     return 0

@@ -143,3 +143,65 @@ def level_trend_geometry(canes: np.ndarray, resid: np.ndarray, level: np.ndarray
     return {"r": obs, "p": float(min(1.0, p)), "null_median": float(np.median(null)),
             "geometry_sd": math.sqrt(vg), "geometry_bounded": bool(bounded), "n_trials_left_out": left_out,
             "n_canes": int(C)}
+
+
+def within_trend_geometry(canes: np.ndarray, resid: np.ndarray, position: np.ndarray, g: np.ndarray,
+                          seed: int = 0, reuse: int = 10) -> dict[str, float]:
+    """Within-cane r of the held-out residual with the push's position, against the geometry null.
+
+    Every library effect leaves a cane's pushes in the proportions its physics gives them, and
+    a model that fits must leave no trend with height along a cane: each cane's own modulus
+    and offset drop out of within-cane contrasts, so this check sees what the level trend
+    (between canes) cannot, an effect that acts on part of a cane (a weak zone between the
+    push points softens the pushes above it and spares those below). The within-cane
+    deviations of the residual are correlated with those of ``position`` (pooled over
+    canes). Under a correct model they are trial noise plus the caliper line's own error,
+    which moves a cane's low and high pushes differently (the line's slope error is
+    extrapolated to the base): the null draws that error from ``g`` (:func:`geometry_draws`,
+    within-cane deviations), and trial noise from what the residual's within-cane variance
+    leaves (the geometry's share bounded by it, as in :func:`level_trend_geometry`). Each
+    geometry draw is used ``reuse`` times with fresh noise (noise is cheap, the draws are
+    not), so the null has ``reuse`` x draws values and p resolves the 0.002 level.
+
+    Returns
+    -------
+    dict
+        ``r``, two-sided ``p``, ``null_sd`` (spread of the null's r), ``geometry_bounded``,
+        ``n_trials``, ``n_canes``.
+    """
+    ok = np.isfinite(resid) & np.isfinite(position) & np.all(np.isfinite(g), axis=0)
+    canes, resid, position, g = np.asarray(canes)[ok], resid[ok], position[ok], g[:, ok]
+    uniq, inv = np.unique(canes, return_inverse=True)
+    cnt = np.bincount(inv).astype(float)
+    C, n = len(uniq), len(resid)
+    out = {"r": math.nan, "p": 1.0, "null_sd": math.nan, "geometry_bounded": False, "n_trials": int(n),
+           "n_canes": int(C)}
+    dfw = n - C
+    if C < 3 or dfw < 4:
+        return out
+
+    def within(a: np.ndarray) -> np.ndarray:  # deviations from each cane's mean (last axis: trials)
+        means = np.stack([np.bincount(inv, row, minlength=C) for row in np.atleast_2d(a)]) / cnt
+        return a - means[..., inv] if a.ndim > 1 else a - means[0, inv]
+
+    rw, xw = within(resid), within(position)
+    if not (np.any(xw != 0) and np.any(rw != 0)):
+        return out
+    obs = _corr(rw, xw)
+    gw = np.tile(within(g), (max(1, int(reuse)), 1))
+    s2 = float(rw @ rw) / dfw
+    vg = float(np.mean(np.sum(gw**2, axis=1))) / dfw
+    bounded = vg > s2
+    if bounded:
+        gw = gw * math.sqrt(s2 / vg)
+        vg = s2
+    rng = np.random.default_rng(seed)
+    noise = within(rng.normal(0.0, math.sqrt(max(0.0, s2 - vg)), gw.shape))
+    res = noise - gw
+    xc = xw - xw.mean()
+    rc = res - res.mean(axis=1, keepdims=True)
+    null = (rc @ xc) / np.sqrt(np.sum(rc**2, axis=1) * (xc @ xc))
+    B = len(null)
+    p = 2.0 * min((np.sum(null <= obs) + 1) / (B + 1), (np.sum(null >= obs) + 1) / (B + 1))
+    out.update(r=obs, p=float(min(1.0, p)), null_sd=float(np.std(null)), geometry_bounded=bool(bounded))
+    return out

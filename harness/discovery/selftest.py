@@ -178,6 +178,10 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
         row["resolvable"] = bool(min(members.values()) > 2 * NOISE)
     ad = doc.get("adequacy", {}).get("after_cv", {})
     row["adequacy_r"], row["adequacy_p"] = ad.get("r", math.nan), ad.get("p", math.nan)
+    row["within_p"] = doc.get("adequacy", {}).get("within_after_cv", {}).get("p", math.nan)
+    sh = doc.get("adequacy", {}).get("shape") or {}
+    row["shape_p"] = sh["p"] if sh.get("p") is not None else math.nan
+    row["shape_beta"] = sh["beta"] if sh.get("beta") is not None else math.nan
     row["false_names"] = "+".join(sorted(set(named) - hidden)) or ""
     # effects named and then dropped as stale by selection's backward pass
     row["dropped"] = "+".join(r["removed"] for r in doc["selection"] if r.get("removed")) or ""

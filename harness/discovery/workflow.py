@@ -35,7 +35,12 @@
    whatever the library fitted took the part of it that it could. Its effects
    are then not named: they are reported as ``partial`` (the library's best
    account, with its gap and a model file of its own) and the result is
-   ``unexplained``. Two warnings also set ``unexplained`` and leave the names
+   ``unexplained``. The same holds for a model that leaves a trend with push height within
+   canes (:func:`.adequacy.within_trend_geometry`: an effect acting on part of a cane), and for
+   a model whose predicted change in the traces' shape (a
+   pitched probe's tension stiffens a trace as it goes) the traces do not show
+   (:func:`.shape.shape_check`, on one more run of the baseline engine with the fitted model).
+   Two warnings also set ``unexplained`` and leave the names
    standing: the structure table (:func:`.structure.structure_tests`) showing
    something significant, and the same level trend against a plain cane
    permutation (:func:`.structure.level_trend`), which ignores the shared
@@ -66,11 +71,12 @@ from ..model.config import ModelConfig
 from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
 from ..model.presets import PRESETS
 from ..probe.protocol import PROTOCOLS
-from .adequacy import geometry_draws, level_trend_geometry
+from .adequacy import geometry_draws, level_trend_geometry, within_trend_geometry
 from .fit import Candidate, bootstrap_ci, cross_validate, direction_test_p, fit_candidate, sign_flip_p
 from .onsets import detect_early_contact, detect_onset
 from .screen import trial_geometry
 from .screenset import PITCH_GRID_DEG, ScreenSet, predict_log_k
+from .shape import SHARE as SHAPE_SHARE, shape_check, trace_shapes
 from .structure import between_share, level_trend, structure_tests
 
 BASELINES = {
@@ -543,7 +549,22 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                 "before": level_trend_geometry(canes_f, r_before, lkb0, g_before, seed=seed),
                 "after_cv": level_trend_geometry(canes_f, r_after, F.log_k_model_cv.to_numpy(float), g_after,
                                                  seed=seed)}
-    adequacy["inadequate"] = bool(adequacy["after_cv"]["p"] < ADEQUACY_ALPHA)
+    trend_fails = bool(adequacy["after_cv"]["p"] < ADEQUACY_ALPHA)
+    # within canes: the held-out residual must not trend with push height along a cane (each cane's
+    # own modulus drops out of these contrasts; an effect acting on part of a cane shows here)
+    height = F.height_m.to_numpy(float)
+    adequacy["within_before"] = within_trend_geometry(canes_f, r_before, height, g_before, seed=seed)
+    adequacy["within_after_cv"] = within_trend_geometry(canes_f, r_after, height, g_after, seed=seed)
+    within_fails = bool(adequacy["within_after_cv"]["p"] < ADEQUACY_ALPHA)
+    # the traces' shape: a model that predicts they bend (a pitched probe's tension) where they do
+    # not is not their explanation, whatever it fits of the stiffness (.shape)
+    t_s = time.perf_counter()
+    adequacy["shape"] = _shape_check(trials, F, run.traces, final.fit.specs, base_backend, proto, cfg0, obstruction,
+                                     outp, executor, progress, seed)
+    timing["shape_s"] = time.perf_counter() - t_s
+    shape_p = adequacy["shape"].get("p")
+    shape_fails = shape_p is not None and shape_p < ADEQUACY_ALPHA
+    adequacy["inadequate"] = trend_fails or within_fails or shape_fails
     # the same trend against a plain cane permutation, blind to the shared geometry error and so
     # biased toward finding one: it names nothing and withholds nothing, it only warns
     # (``unexplained``) that the model may be incomplete
@@ -553,15 +574,29 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     fitted = tuple(final.fit.specs)
     partial: list[dict[str, Any]] = []
     if adequacy["inadequate"]:
-        a = adequacy["after_cv"]
+        a, sh = adequacy["after_cv"], adequacy["shape"]
         partial = [n for n in named if n["scope"] == "global"]
         named = [n for n in named if n["scope"] != "global"]
         what = ", ".join(n["effect"] for n in partial) or "the baseline"
-        notes.append(f"the model ({what}) does not scale across canes as the data do: the held-out residual "
-                     f"{'falls' if a['r'] < 0 else 'rises'} with the model's stiffness level between canes "
-                     f"(r = {a['r']:.2f}; the calipers' own error alone gives {a['null_median']:.2f}; "
-                     f"p = {a['p']:.2g} < {ADEQUACY_ALPHA}): an effect outside the library, or one the library has "
-                     f"with the wrong scaling, remains"
+        why = []
+        if trend_fails:
+            why.append(f"does not scale across canes as the data do: the held-out residual "
+                       f"{'falls' if a['r'] < 0 else 'rises'} with the model's stiffness level between canes "
+                       f"(r = {a['r']:.2f}; the calipers' own error alone gives {a['null_median']:.2f}; "
+                       f"p = {a['p']:.2g} < {ADEQUACY_ALPHA})")
+        if within_fails:
+            w = adequacy["within_after_cv"]
+            why.append(f"does not share the stiffness along a cane as the data do: within canes the held-out "
+                       f"residual {'falls' if w['r'] < 0 else 'rises'} with push height (r = {w['r']:.2f}, the "
+                       f"calipers' error and trial noise alone give r within +-{2 * w['null_sd']:.2f}; p = "
+                       f"{w['p']:.2g} < {ADEQUACY_ALPHA})")
+        if shape_fails:
+            why.append(f"bends the traces as they do not bend: it changes their stiffening over the push by "
+                       f"{sh['predicted_mean']:+.3f} on average (spread {sh['predicted_spread']:.3f} across trials) "
+                       f"and the traces show {sh['beta']:.2f} of that change (p = {sh['p']:.2g} < {ADEQUACY_ALPHA} "
+                       f"against {sh['share']:.2g} of it)")
+        notes.append(f"the model ({what}) " + "; and it ".join(why) + ": an effect outside the library, or one the "
+                     f"library has with the wrong scaling or shape, remains"
                      + (f"; what the library fitted ({what}) took the part of it that it could and is not named: "
                         f"it is reported as partial, with model_partial.yaml" if partial else ""))
     elif trend_warning:
@@ -648,12 +683,37 @@ def _reanchor(trials, F, ss, lka, cv_cur, lkf, backend, proto, cfg0, obstruction
     return ss, lka, cv_cur
 
 
+def _engine_run(trials, F, backend, proto, cfg0, effects, folder, executor, progress):
+    """``backend`` on the scored trials (``F``'s) with ``effects``: the runner's outcome."""
+    keep = set(F.trial)
+    return run_trials([t for t in trials if t.id in keep], [backend], proto, cfg0.replace(effects=effects), folder,
+                      executor=executor, progress=progress)
+
+
 def _engine_log_k(trials, F, backend, proto, cfg0, effects, folder, executor, progress) -> np.ndarray:
     """ln k of ``backend`` on the scored trials (``F``'s order) with ``effects``; NaN where it failed."""
-    keep = set(F.trial)
-    res = run_trials([t for t in trials if t.id in keep], [backend], proto, cfg0.replace(effects=effects), folder,
-                     executor=executor, progress=progress).to_df()
+    res = _engine_run(trials, F, backend, proto, cfg0, effects, folder, executor, progress).to_df()
     return _ok_log_k(res, backend, F.trial)
+
+
+def _shape_check(trials, F, base_traces, specs, backend, proto, cfg0, obstruction, outp, executor, progress,
+                 seed) -> dict[str, Any]:
+    """:func:`.shape.shape_check` of the fitted model ``specs`` (one more run of the baseline engine).
+
+    Trials with an obstruction onset are left out: their push is cut at the elbow, and what is
+    left of it says little about shape. Without effects there is nothing to check.
+    """
+    if not specs:
+        return {"p": None, "n_trials": 0, "share": SHAPE_SHARE, "reason": "no effect fitted"}
+    run = _engine_run(trials, F, backend, proto, cfg0, tuple(specs) + obstruction,
+                      outp / "shape_model" if outp else None, executor, progress)
+    free = F[~np.isfinite(F.obstruction_onset_mm.to_numpy(float))]
+    shapes = trace_shapes(list(free.trial), base_traces, base_traces, run.traces, backend)
+    out = shape_check(free.cane.to_numpy(), shapes, seed=seed)
+    out["test"] = ("one-sided: do the traces show at least the share of the fitted model's change in their "
+                   "stiffening over the push (its run on the baseline engine against the baseline's)?")
+    out["engine"] = backend
+    return out
 
 
 def field_onsets(fields: dict) -> dict[str, float]:
@@ -772,7 +832,8 @@ def write_outputs(res: DiscoveryResult, out: Path, preset: str, ci: dict) -> Non
         write_model_file(out / "model_partial.yaml", res.partial_config, preset,
                          {n["effect"]: n["ci95"] for n in res.partial if n["ci95"]},
                          {**made, "partial": "the library's best account; its names were withheld: it does not "
-                                             "scale across canes as the data do (discovery.json, adequacy)"})
+                                             "scale across canes, or bend the traces, as the data do "
+                                             "(discovery.json, adequacy)"})
     from canebench.reports.build import build_report
     from canebench.reports.discovery import figures
 

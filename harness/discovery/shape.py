@@ -1,0 +1,163 @@
+"""The shape check: do the traces bend the way the named model says they should?
+
+Selection scores each trial's stiffness, one number per push. A rig trace says
+more: how the force grows over the push. Some effects change that shape, not
+only the slope: a probe pitched up pulls the cane along its axis, and the
+tension stiffens it as it bends (pitched down, compression softens it), by
+about 16 % over a 45 mm push at 30 degrees on the self-test's canes; a
+modulus scale, a flare, a root or a rig spring leave a linear trace linear.
+An effect the library lacks can take a library name whose stiffness pattern
+it shares but whose shape it does not: on an independently generated
+dataset a neighbouring cane's lateral spring support (a linear spring, so
+linear traces) was named a 43 degree pitch, whose tension the traces did not
+show.
+
+The check compares three shapes per trial, over the push all three cover:
+the field trace's, the baseline engine's, and the same engine's with the
+named model. Shape is the stiffening over the push, kappa = 2 b X / (a + b X)
+from F = c + a x + b x^2 fitted over [0, X] (the slope at the end minus the
+slope at the start, over the mean slope). The model predicts a change
+D = kappa_model - kappa_base; the traces show u = kappa_field - kappa_base.
+The traces' shape and the engine's may differ by a constant (how the field
+stage places contact, a rig artefact, what the engine assumes about the
+probe): u = b + beta D + noise, with an intercept b, so only the spread of D
+across trials (a pitch stiffens a soft cane that travels the whole 45 mm
+more than a stiff one stopped early by the 1000 gf limit) informs beta.
+
+The model passes unless the traces show clearly less than half the change it
+predicts: one-sided test of beta >= 1/2, with the score
+S = sum_c sum_(i in c) w_i (D_i - Dbar)(u_i - ubar - (D_i - Dbar) / 2)
+calibrated by flipping the canes' signs (canes are the independent units; a
+trace's samples are not independent, so the quadratic fit's own error only
+weights the trials). Half, not one: a correctly named pitch reproduces its
+shape change only as well as the engine's probe matches the rig's. Where the
+model predicts no material change in shape (D spread under
+:data:`MIN_SHAPE_SPREAD`), there is nothing to check and the check says so.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+#: fewest samples of a common window for a trial to enter the check (a quadratic and its error)
+MIN_SAMPLES = 8
+#: a trace shape's error floor (dimensionless stiffening): what two faithful descriptions of one
+#: push differ by (the engines agree on kappa to about 0.01 on the bundled trials); it caps the
+#: weight of a long, clean trace
+SHAPE_FLOOR = 0.02
+#: the fraction of the predicted shape change the traces must show
+SHARE = 0.5
+#: weighted standard deviation of D below which the model predicts no shape change worth checking
+MIN_SHAPE_SPREAD = 0.01
+N_FLIPS = 20000
+
+
+def stiffening(x: np.ndarray, f: np.ndarray) -> tuple[float, float]:
+    """(kappa, its standard error) of one trace: F = c + a x + b x^2 over the trace's own range.
+
+    kappa = 2 b X / (a + b X), the change of slope from start to end over the mean slope
+    (0 for a straight trace, 0.2 for one 20 % stiffer at the end than at the start, in
+    proportion). NaN where the trace is too short or its mean slope is not positive.
+    """
+    x = np.asarray(x, float)
+    f = np.asarray(f, float)
+    if len(x) < MIN_SAMPLES:
+        return math.nan, math.nan
+    X = float(x.max() - x.min())
+    if not X > 0:
+        return math.nan, math.nan
+    xi = (x - x.min()) / X
+    A = np.column_stack([np.ones_like(xi), xi, xi**2])
+    coef, *_ = np.linalg.lstsq(A, f, rcond=None)
+    _, a, b = coef
+    mean_slope = a + b
+    if not mean_slope > 0:
+        return math.nan, math.nan
+    res = f - A @ coef
+    s2 = float(res @ res) / max(1, len(x) - 3)
+    var_b = s2 * float(np.linalg.inv(A.T @ A)[2, 2])
+    return float(2.0 * b / mean_slope), float(2.0 * math.sqrt(var_b) / mean_slope)
+
+
+def _by_trial(traces: pd.DataFrame, backend: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    t = traces[traces.backend == backend].sort_values(["trial", "displacement_mm"])
+    return {str(k): (g.displacement_mm.to_numpy(float), g.force_n.to_numpy(float)) for k, g in t.groupby("trial")}
+
+
+def trace_shapes(trials: list[str], field: pd.DataFrame, base: pd.DataFrame, model: pd.DataFrame,
+                 backend: str) -> pd.DataFrame:
+    """kappa of each trial's field, baseline-engine and model-engine trace over their common push.
+
+    ``field`` and ``base`` are traces tables (``traces.csv`` rows: trial, backend,
+    displacement_mm, force_n) holding the field's rows (backend ``field``) and the baseline
+    engine's; ``model`` the same engine's run with the named model. Each trace is cut to the
+    shortest of the three (the rig's 1000 gf stop comes earlier on a stiffer model), so all
+    three shapes describe the same push. Columns: trial, kappa_field, se_field, kappa_base,
+    kappa_model, window_mm (NaN where a trace is missing or too short).
+    """
+    fld, bse, mdl = _by_trial(field, "field"), _by_trial(base, backend), _by_trial(model, backend)
+    rows = []
+    for t in trials:
+        row = {"trial": t, "kappa_field": math.nan, "se_field": math.nan, "kappa_base": math.nan,
+               "kappa_model": math.nan, "window_mm": math.nan}
+        if t in fld and t in bse and t in mdl:
+            X = min(float(np.max(v[0])) for v in (fld[t], bse[t], mdl[t]))
+            cut = [(x[x <= X + 1e-9], f[x <= X + 1e-9]) for x, f in (fld[t], bse[t], mdl[t])]
+            (kf, sf), (kb, _), (km, _) = (stiffening(x, f) for x, f in cut)
+            row.update(kappa_field=kf, se_field=sf, kappa_base=kb, kappa_model=km, window_mm=X)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def shape_check(canes: np.ndarray, shapes: pd.DataFrame, share: float = SHARE, seed: int = 0,
+                n_flips: int = N_FLIPS) -> dict:
+    """One-sided test that the traces show at least ``share`` of the model's predicted shape change.
+
+    Parameters
+    ----------
+    canes : array (n,)
+        Cane of each row of ``shapes``.
+    shapes : DataFrame
+        :func:`trace_shapes` rows (NaN rows are left out).
+
+    Returns
+    -------
+    dict
+        ``p`` (None when there is nothing to check), ``beta`` (the share of the predicted change
+        the traces show, weighted least squares with an intercept), ``predicted_spread`` (weighted
+        sd of D), ``predicted_mean`` and ``shown_mean`` (weighted means of D and u), ``n_trials``,
+        ``n_canes``, ``share``.
+    """
+    D = (shapes.kappa_model - shapes.kappa_base).to_numpy(float)
+    u = (shapes.kappa_field - shapes.kappa_base).to_numpy(float)
+    se = shapes.se_field.to_numpy(float)
+    ok = np.isfinite(D) & np.isfinite(u) & np.isfinite(se)
+    canes, D, u, se = np.asarray(canes)[ok], D[ok], u[ok], se[ok]
+    out = {"p": None, "beta": None, "predicted_spread": None, "predicted_mean": None, "shown_mean": None,
+           "n_trials": int(ok.sum()), "n_canes": int(len(np.unique(canes))), "share": share}
+    if ok.sum() < 6 or out["n_canes"] < 3:
+        return out
+    w = 1.0 / (se**2 + SHAPE_FLOOR**2)
+    Dm, um = float(np.average(D, weights=w)), float(np.average(u, weights=w))
+    Dc, uc = D - Dm, u - um
+    spread = math.sqrt(float(np.average(Dc**2, weights=w)))
+    out.update(predicted_spread=spread, predicted_mean=Dm, shown_mean=um)
+    if spread < MIN_SHAPE_SPREAD:
+        return out
+    out["beta"] = float(np.sum(w * Dc * uc) / np.sum(w * Dc**2))
+    uniq, inv = np.unique(canes, return_inverse=True)
+    per_cane = np.bincount(inv, w * Dc * (uc - share * Dc), minlength=len(uniq))
+    obs = float(per_cane.sum())
+    n = len(uniq)
+    if n <= 16:
+        flips = ((np.arange(2**n)[:, None] >> np.arange(n)[None, :]) & 1) * 2.0 - 1.0
+        null = flips @ per_cane
+        out["p"] = float(np.mean(null <= obs + 1e-12))
+    else:
+        flips = np.random.default_rng(seed).choice([-1.0, 1.0], size=(n_flips, n))
+        null = flips @ per_cane
+        out["p"] = float((np.sum(null <= obs + 1e-12) + 1) / (n_flips + 1))
+    return out

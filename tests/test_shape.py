@@ -1,0 +1,146 @@
+"""The shape check (:mod:`canebench.discovery.shape`): the traces must bend as the named model says."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from canebench.discovery.shape import shape_check, stiffening, trace_shapes
+
+
+def test_stiffening_is_the_change_of_slope_over_the_mean_slope():
+    """F = x + 0.1 x^2 on [0, 10] mm: slope 1 at the start, 3 at the end, mean slope
+    (F(10) - F(0)) / 10 = 2, so kappa = (3 - 1) / 2 = 1; a line has none; an offset (the
+    engines' gravity preload) changes nothing; a softening trace is negative."""
+    x = np.arange(0.0, 10.01, 0.5)
+    k, se = stiffening(x, x + 0.1 * x**2)
+    assert k == pytest.approx(1.0, abs=1e-9) and se == pytest.approx(0.0, abs=1e-9)
+    assert stiffening(x, 0.3 * x)[0] == pytest.approx(0.0, abs=1e-12)
+    assert stiffening(x, 5.0 + x + 0.1 * x**2)[0] == pytest.approx(1.0, abs=1e-9)
+    # slope 1 falling to 0.6 over 10 mm: mean slope 0.8, kappa = -0.4 / 0.8
+    assert stiffening(x, x - 0.02 * x**2)[0] == pytest.approx(-0.5, abs=1e-9)
+    # too short, or not rising: no shape
+    assert np.isnan(stiffening(x[:5], x[:5])[0]) and np.isnan(stiffening(x, -x)[0])
+    # noise gives an error; its size follows the noise
+    rng = np.random.default_rng(0)
+    _, se1 = stiffening(x, x + rng.normal(0, 0.05, len(x)))
+    _, se2 = stiffening(x, x + rng.normal(0, 0.2, len(x)))
+    assert 0 < se1 < se2
+
+
+def _table(rng, beta, n_canes=18, per=3, spread=0.05, noise=0.03, offset=-0.02):
+    """Shapes of 18 canes x 3 trials: the model predicts D (spread about a mean of 0.15), the
+    traces show offset + beta D + noise."""
+    n = n_canes * per
+    D = 0.15 + rng.normal(0, spread, n)
+    base = rng.normal(0.01, 0.01, n)
+    u = offset + beta * D + rng.normal(0, noise, n)
+    shapes = pd.DataFrame({"kappa_base": base, "kappa_model": base + D, "kappa_field": base + u,
+                           "se_field": np.full(n, noise)})
+    return np.repeat(np.arange(n_canes), per), shapes
+
+
+def test_the_shape_check_holds_its_level_and_sees_a_missing_shape_change():
+    """At the boundary (the traces show exactly half the change) the check rejects at about its
+    level (sign flips over canes: exact for symmetric cane sums); where the traces show none of
+    it, it rejects at 0.002 almost always; where they show all of it, never. A model that
+    predicts no change in shape leaves nothing to check."""
+    rng = np.random.default_rng(1)
+    ps = np.array([shape_check(*_table(rng, 0.5), seed=i, n_flips=2000)["p"] for i in range(300)])
+    # binomial sd of a 5 % rate over 300 tables is 1.3 %
+    assert 0.02 < np.mean(ps < 0.05) < 0.09, np.mean(ps < 0.05)
+    # power with 18 canes' sign flips (the cane sums, not the trials, are the units; measured 0.92)
+    none = [shape_check(*_table(rng, 0.0), seed=i, n_flips=2000) for i in range(50)]
+    assert np.mean([r["p"] < 0.002 for r in none]) >= 0.85
+    assert np.median([r["beta"] for r in none]) == pytest.approx(0.0, abs=0.15)
+    full = [shape_check(*_table(rng, 1.0), seed=i, n_flips=2000) for i in range(50)]
+    assert min(r["p"] for r in full) > 0.05
+    assert np.median([r["beta"] for r in full]) == pytest.approx(1.0, abs=0.15)
+    # a constant offset between the traces and the engine is not a shape change (intercept)
+    canes, sh = _table(rng, 1.0, offset=-0.3)
+    assert shape_check(canes, sh)["p"] > 0.05
+    # nothing predicted: no test
+    canes, sh = _table(rng, 1.0, spread=0.001)
+    sh["kappa_model"] = sh["kappa_base"] + 0.002
+    r = shape_check(canes, sh)
+    assert r["p"] is None and r["beta"] is None and r["predicted_spread"] < 0.01
+
+
+@pytest.mark.parametrize("angle", [30.0])
+def test_a_pitched_probe_bends_the_engines_traces_and_the_check_sees_it_missing(angle):
+    """The beam pushed with the probe pitched up stiffens over the push (the pull along the cane
+    and the force turning against the cane as it tilts), pitched down it softens; level, the
+    traces are near straight (large-deflection effects are second order at 45 mm). Traces
+    made by the pitched engine (with load-cell noise) pass the check against the pitched model;
+    traces made level fail it: a pitch named where the traces do not bend is not their
+    explanation."""
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.discovery.workflow import BASELINES
+    from canebench.execute.executors import SerialExecutor
+    from canebench.execute.runner import run_trials
+    from canebench.model.effects import EffectSpec
+    from canebench.model.presets import PRESETS
+    from canebench.probe.protocol import PROTOCOLS
+
+    # all 18 canes: the check flips canes' signs, and 6 canes cannot reach p < 0.002 (1/64)
+    trials = load_dataset(bundled_dataset())
+    backend, preset, _ = BASELINES["beam"]
+    cfg0, proto = PRESETS[preset], PROTOCOLS["fast"]
+
+    def traces(pitch):
+        cfg = cfg0 if pitch == 0 else cfg0.replace(
+            effects=(EffectSpec("probe_misalignment", (("angle_deg", pitch),)),))
+        return run_trials(trials, [backend], proto, cfg, None, executor=SerialExecutor()).traces
+
+    level, up, down = traces(0.0), traces(angle), traces(-angle)
+    ids = [t.id for t in trials]
+    cane_of = {t.id: t.cane.id for t in trials}
+
+    def as_field(tr, seed):
+        f = tr[tr.backend == backend].copy()
+        f["backend"] = "field"
+        # 2 gf of load-cell noise
+        f["force_n"] = f.force_n + np.random.default_rng(seed).normal(0, 2 * 9.80665e-3, len(f))
+        return f
+
+    sh_up = trace_shapes(ids, as_field(up, 0), level, up, backend).dropna()
+    sh_down = trace_shapes(ids, as_field(down, 1), level, down, backend).dropna()
+    assert len(sh_up) >= 45 and len(sh_down) >= 45  # a stiff trial stopped at 1000 gf within 4 mm has none
+    d_up, d_down = sh_up.kappa_model - sh_up.kappa_base, sh_down.kappa_model - sh_down.kappa_base
+    # every trial bends the pitch's way, the more the longer its push (the stiff ones stop early)
+    assert np.all(d_up > 0) and np.all(d_down < 0), (sh_up, sh_down)
+    long_up, long_down = (sh_up.window_mm >= 35).to_numpy(), (sh_down.window_mm >= 35).to_numpy()
+    assert long_up.sum() >= 4 and np.all(d_up[long_up] > 0.08) and np.all(d_down[long_down] < -0.08)
+    assert np.max(np.abs(sh_up.kappa_base)) < 0.05
+    ok_up = shape_check(sh_up.trial.map(cane_of).to_numpy(), sh_up)
+    ok_down = shape_check(sh_down.trial.map(cane_of).to_numpy(), sh_down)
+    assert ok_up["p"] > 0.05 and ok_down["p"] > 0.05, (ok_up, ok_down)
+    assert ok_up["beta"] == pytest.approx(1.0, abs=0.3)
+    # the traces were made level; the model says pitched
+    sh_bad = trace_shapes(ids, as_field(level, 2), level, up, backend).dropna()
+    bad = shape_check(sh_bad.trial.map(cane_of).to_numpy(), sh_bad)
+    assert bad["p"] < 0.002 and bad["beta"] < 0.3, bad
+
+
+def test_discover_withholds_a_pitch_the_traces_do_not_show(tmp_path):
+    """A neighbouring cane's lateral spring support (outside the library; a linear spring, so
+    linear traces) screened against the probe's pitch alone: the pitch fits much of the
+    stiffening, but the traces do not bend as a pitched probe's would, so nothing is named (the
+    pitch is reported as partial) and the result is unexplained, by the shape check alone: the
+    level trend does not fail here (p = 0.06 when this test was written)."""
+    from canebench.canes.generate_hidden import generate_hidden
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.execute.executors import make_executor
+
+    d = generate_hidden(tmp_path / "support", 9504, {"lateral_support": {"k_support": 100.0, "height_frac": 0.4}})
+    res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+                   candidates=("probe_misalignment",))
+    sh = res.adequacy["shape"]
+    assert [n["effect"] for n in res.partial] == ["probe_misalignment"], (res.partial, res.named)
+    assert not [n for n in res.named if n["scope"] == "global"]
+    assert sh["p"] < 0.002 and sh["beta"] < 0.3 and sh["predicted_mean"] > 0.1, sh
+    assert res.adequacy["after_cv"]["p"] >= 0.002  # the shape check, not the trend, withheld it
+    assert res.unexplained and res.adequacy["inadequate"]
+    assert any("bends the traces as they do not bend" in n for n in res.notes), res.notes
