@@ -60,7 +60,9 @@ def main(a: argparse.Namespace) -> int:
     for n in doc["notes"]:
         print(f"  {n}")
     for n in doc["named"] + doc.get("partial", []):
-        what = "named" if n in doc["named"] else "partial (not named: the model does not fit the data's scaling or shape)"
+        what = ("named" if n in doc["named"] else
+                "partial (not named: the model does not fit how stiffness scales across or along canes, or the "
+                "traces' shape)")
         if n["effect"] == "obstruction":
             print(f"  named: obstruction in {n['n_trials']} trial(s): "
                   + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" for t, v in n["local"].items()))
@@ -69,8 +71,8 @@ def main(a: argparse.Namespace) -> int:
                 f"{k} = {v:.4g} {n['units'].get(k, '')} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}]"
                 for k, v in n["params"].items()))
     if doc.get("partial") and not any(n["scope"] == "global" for n in doc["named"]):
-        print("  named: nothing; the library's best account (partial, above) does not scale across canes, or bend "
-              "the traces, as the data do")
+        print("  named: nothing; the library's best account (partial, above) does not scale across canes, share "
+              "the stiffness along a cane, or bend the traces as the data do")
     elif not doc["named"]:
         print("  named: nothing in the library explains the residual significantly")
     print(f"  stopped: {doc['stop_reason']}")
@@ -99,8 +101,8 @@ def main(a: argparse.Namespace) -> int:
               f"{sh['predicted_spread']:.3f}), the traces show {sh['beta']:.2f} of that; p = {sh['p']:.3g} against "
               f"{sh['share']:.2g} of it (alpha {doc['adequacy']['alpha']})")
     elif sh.get("predicted_spread") is not None:
-        print(f"  shape: the model barely changes the traces' stiffening (spread {sh['predicted_spread']:.3f}); "
-              "nothing to check")
+        print(f"  shape: the model changes the traces' stiffening by {sh['predicted_mean']:+.3f} on average and "
+              f"barely from trial to trial (spread {sh['predicted_spread']:.3f}): nothing to check")
     print(f"  unexplained (residual structure, or a model that does not fit the data's scaling or shape): "
           f"{doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")

@@ -161,7 +161,10 @@ def within_trend_geometry(canes: np.ndarray, resid: np.ndarray, position: np.nda
     within-cane deviations), and trial noise from what the residual's within-cane variance
     leaves (the geometry's share bounded by it, as in :func:`level_trend_geometry`). Each
     geometry draw is used ``reuse`` times with fresh noise (noise is cheap, the draws are
-    not), so the null has ``reuse`` x draws values and p resolves the 0.002 level.
+    not), so the null has ``reuse`` x draws values. Where the geometry's share is bounded
+    (it takes all the within-cane variance, as on the real data) there is no noise left and
+    the copies are the same: the null then has the draws' 2000 distinct values, which still
+    resolve p = 0.001 (beyond every draw).
 
     Returns
     -------
@@ -177,7 +180,7 @@ def within_trend_geometry(canes: np.ndarray, resid: np.ndarray, position: np.nda
     out = {"r": math.nan, "p": 1.0, "null_sd": math.nan, "geometry_bounded": False, "n_trials": int(n),
            "n_canes": int(C)}
     dfw = n - C
-    if C < 3 or dfw < 4:
+    if C < 4 or dfw < 4:  # as the level trend: too few canes to say anything
         return out
 
     def within(a: np.ndarray) -> np.ndarray:  # deviations from each cane's mean (last axis: trials)

@@ -199,6 +199,24 @@ def cross_validate(cand: Candidate, ss: ScreenSet, log_k_field: np.ndarray, log_
     return CVResult(full, loss, resid, folds)
 
 
+#: up to this many canes every sign assignment is enumerated; beyond, ``n_perm`` random ones
+EXACT_FLIPS_UP_TO = 16
+
+
+def sign_flips(n: int, n_perm: int, seed: int) -> tuple[np.ndarray, bool]:
+    """Sign vectors over ``n`` canes: all 2^n (n <= :data:`EXACT_FLIPS_UP_TO`) or ``n_perm``
+    random ones; and whether they are all (an exact null, which includes the observed signs)."""
+    if n <= EXACT_FLIPS_UP_TO:
+        return ((np.arange(2**n)[:, None] >> np.arange(n)[None, :]) & 1) * 2.0 - 1.0, True
+    return np.random.default_rng(seed).choice([-1.0, 1.0], size=(n_perm, n)), False
+
+
+def flip_p(null: np.ndarray, obs: float, exact: bool, tol: float = 1e-12) -> float:
+    """One-sided p = P(null >= obs): the exact share, or the Monte Carlo estimate (+1 in both counts)."""
+    hits = np.sum(null >= obs - tol)
+    return float(hits / len(null)) if exact else float((hits + 1) / (len(null) + 1))
+
+
 def sign_flip_p(diff: np.ndarray, n_perm: int = 20000, seed: int = 0) -> float:
     """One-sided p that the per-cane gains ``diff`` are centred above 0.
 
@@ -214,13 +232,8 @@ def sign_flip_p(diff: np.ndarray, n_perm: int = 20000, seed: int = 0) -> float:
         return 1.0
     ranks = np.argsort(np.argsort(np.abs(d))) + 1.0
     obs = float(np.sum(np.sign(d) * ranks))
-    if n <= 16:
-        signs = ((np.arange(2**n)[:, None] >> np.arange(n)[None, :]) & 1) * 2 - 1
-        null = signs @ ranks
-        return float(np.mean(null >= obs - 1e-9))
-    signs = np.random.default_rng(seed).choice([-1.0, 1.0], size=(n_perm, n))
-    null = signs @ ranks
-    return float((np.sum(null >= obs - 1e-9) + 1) / (n_perm + 1))
+    signs, exact = sign_flips(n, n_perm, seed)
+    return flip_p(signs @ ranks, obs, exact, tol=1e-9)
 
 
 def apply_vinv(x: np.ndarray, inv: np.ndarray, counts: np.ndarray, s2: float, t2: float) -> np.ndarray:
@@ -322,14 +335,8 @@ def direction_test_p(name: str | tuple[str, ...] | list[tuple[str, ...]], ss: Sc
         return 1.0
     U = np.array(cols).T  # canes x directions
     obs = float(np.max(U.sum(axis=0)))
-    n = len(uniq)
-    if n <= 16:
-        flips = ((np.arange(2**n)[:, None] >> np.arange(n)[None, :]) & 1) * 2.0 - 1.0
-        null = np.max(flips @ U, axis=1)
-        return float(np.mean(null >= obs - 1e-12))
-    flips = np.random.default_rng(seed).choice([-1.0, 1.0], size=(n_perm, n))
-    null = np.max(flips @ U, axis=1)
-    return float((np.sum(null >= obs - 1e-12) + 1) / (n_perm + 1))
+    flips, exact = sign_flips(len(uniq), n_perm, seed)
+    return flip_p(np.max(flips @ U, axis=1), obs, exact)
 
 
 def bootstrap_ci(fit: Fit, ss: ScreenSet, log_k_field: np.ndarray, log_k_base: np.ndarray,

@@ -27,12 +27,17 @@ more than a stiff one stopped early by the 1000 gf limit) informs beta.
 The model passes unless the traces show clearly less than half the change it
 predicts: one-sided test of beta >= 1/2, with the score
 S = sum_c sum_(i in c) w_i (D_i - Dbar)(u_i - ubar - (D_i - Dbar) / 2)
+(Dbar, ubar the w-weighted means: weighted least squares with an intercept)
 calibrated by flipping the canes' signs (canes are the independent units; a
 trace's samples are not independent, so the quadratic fit's own error only
 weights the trials). Half, not one: a correctly named pitch reproduces its
 shape change only as well as the engine's probe matches the rig's. Where the
-model predicts no material change in shape (D spread under
-:data:`MIN_SHAPE_SPREAD`), there is nothing to check and the check says so.
+model predicts no material change in shape across trials (D's spread under
+:data:`MIN_SHAPE_SPREAD`), there is nothing to check and the check says so;
+that includes a change the same on every trial, which the intercept takes
+(the spread comes from trials pushed further or less far: a stiff cane stops
+at the 1000 gf limit within a few mm). With n canes the exact sign-flip null
+cannot give p below 2^-n (``p_floor``): 8 canes or fewer cannot reach 0.002.
 """
 
 from __future__ import annotations
@@ -41,6 +46,8 @@ import math
 
 import numpy as np
 import pandas as pd
+
+from .fit import flip_p, sign_flips
 
 #: fewest samples of a common window for a trial to enter the check (a quadratic and its error)
 MIN_SAMPLES = 8
@@ -87,18 +94,27 @@ def _by_trial(traces: pd.DataFrame, backend: str) -> dict[str, tuple[np.ndarray,
     return {str(k): (g.displacement_mm.to_numpy(float), g.force_n.to_numpy(float)) for k, g in t.groupby("trial")}
 
 
+COLUMNS = ["trial", "kappa_field", "se_field", "kappa_base", "kappa_model", "window_mm"]
+
+
 def trace_shapes(trials: list[str], field: pd.DataFrame, base: pd.DataFrame, model: pd.DataFrame,
-                 backend: str) -> pd.DataFrame:
+                 backend: str, measured=None) -> pd.DataFrame:
     """kappa of each trial's field, baseline-engine and model-engine trace over their common push.
 
     ``field`` and ``base`` are traces tables (``traces.csv`` rows: trial, backend,
     displacement_mm, force_n) holding the field's rows (backend ``field``) and the baseline
     engine's; ``model`` the same engine's run with the named model. Each trace is cut to the
     shortest of the three (the rig's 1000 gf stop comes earlier on a stiffer model), so all
-    three shapes describe the same push. Columns: trial, kappa_field, se_field, kappa_base,
-    kappa_model, window_mm (NaN where a trace is missing or too short).
+    three shapes describe the same push. ``measured(trial, x_mm, f_n) -> (x_mm, f_n)``, when
+    given, is the model's record of a trace (its rig spring), applied to the baseline's so that
+    all three are in the same millimetres. Columns :data:`COLUMNS` (NaN where a trace is
+    missing or too short).
     """
     fld, bse, mdl = _by_trial(field, "field"), _by_trial(base, backend), _by_trial(model, backend)
+    if measured is not None:
+        # the model's own record of a push (a rig spring: x + F / k_rig) applied to the baseline
+        # engine's trace, so all three are in the rig's millimetres and one window is one push
+        bse = {t: measured(t, *xf) for t, xf in bse.items()}
     rows = []
     for t in trials:
         row = {"trial": t, "kappa_field": math.nan, "se_field": math.nan, "kappa_base": math.nan,
@@ -109,7 +125,7 @@ def trace_shapes(trials: list[str], field: pd.DataFrame, base: pd.DataFrame, mod
             (kf, sf), (kb, _), (km, _) = (stiffening(x, f) for x, f in cut)
             row.update(kappa_field=kf, se_field=sf, kappa_base=kb, kappa_model=km, window_mm=X)
         rows.append(row)
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=COLUMNS)
 
 
 def shape_check(canes: np.ndarray, shapes: pd.DataFrame, share: float = SHARE, seed: int = 0,
@@ -126,9 +142,10 @@ def shape_check(canes: np.ndarray, shapes: pd.DataFrame, share: float = SHARE, s
     Returns
     -------
     dict
-        ``p`` (None when there is nothing to check), ``beta`` (the share of the predicted change
-        the traces show, weighted least squares with an intercept), ``predicted_spread`` (weighted
-        sd of D), ``predicted_mean`` and ``shown_mean`` (weighted means of D and u), ``n_trials``,
+        ``p`` (None when there is nothing to check), ``p_floor`` (the smallest p the canes'
+        sign flips can give), ``beta`` (the share of the predicted change the traces show,
+        weighted least squares with an intercept), ``predicted_spread`` (weighted sd of D),
+        ``predicted_mean`` and ``shown_mean`` (weighted means of D and u), ``n_trials``,
         ``n_canes``, ``share``.
     """
     D = (shapes.kappa_model - shapes.kappa_base).to_numpy(float)
@@ -136,8 +153,8 @@ def shape_check(canes: np.ndarray, shapes: pd.DataFrame, share: float = SHARE, s
     se = shapes.se_field.to_numpy(float)
     ok = np.isfinite(D) & np.isfinite(u) & np.isfinite(se)
     canes, D, u, se = np.asarray(canes)[ok], D[ok], u[ok], se[ok]
-    out = {"p": None, "beta": None, "predicted_spread": None, "predicted_mean": None, "shown_mean": None,
-           "n_trials": int(ok.sum()), "n_canes": int(len(np.unique(canes))), "share": share}
+    out = {"p": None, "p_floor": None, "beta": None, "predicted_spread": None, "predicted_mean": None,
+           "shown_mean": None, "n_trials": int(ok.sum()), "n_canes": int(len(np.unique(canes))), "share": share}
     if ok.sum() < 6 or out["n_canes"] < 3:
         return out
     w = 1.0 / (se**2 + SHAPE_FLOOR**2)
@@ -151,13 +168,8 @@ def shape_check(canes: np.ndarray, shapes: pd.DataFrame, share: float = SHARE, s
     uniq, inv = np.unique(canes, return_inverse=True)
     per_cane = np.bincount(inv, w * Dc * (uc - share * Dc), minlength=len(uniq))
     obs = float(per_cane.sum())
-    n = len(uniq)
-    if n <= 16:
-        flips = ((np.arange(2**n)[:, None] >> np.arange(n)[None, :]) & 1) * 2.0 - 1.0
-        null = flips @ per_cane
-        out["p"] = float(np.mean(null <= obs + 1e-12))
-    else:
-        flips = np.random.default_rng(seed).choice([-1.0, 1.0], size=(n_flips, n))
-        null = flips @ per_cane
-        out["p"] = float((np.sum(null <= obs + 1e-12) + 1) / (n_flips + 1))
+    flips, exact = sign_flips(len(uniq), n_flips, seed)
+    # one-sided toward too little of the change: P(null <= obs)
+    out["p"] = flip_p(-(flips @ per_cane), -obs, exact)
+    out["p_floor"] = 1.0 / len(flips) if exact else 1.0 / (len(flips) + 1)
     return out

@@ -559,11 +559,14 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     # the traces' shape: a model that predicts they bend (a pitched probe's tension) where they do
     # not is not their explanation, whatever it fits of the stiffness (.shape)
     t_s = time.perf_counter()
-    adequacy["shape"] = _shape_check(trials, F, run.traces, final.fit.specs, base_backend, proto, cfg0, obstruction,
-                                     outp, executor, progress, seed)
+    adequacy["shape"] = _shape_check(trials, F, run, final.fit.specs, base_backend, proto, cfg0, obstruction, outp,
+                                     executor, progress, seed)
     timing["shape_s"] = time.perf_counter() - t_s
     shape_p = adequacy["shape"].get("p")
     shape_fails = shape_p is not None and shape_p < ADEQUACY_ALPHA
+    if shape_p is not None and adequacy["shape"]["p_floor"] >= ADEQUACY_ALPHA:
+        notes.append(f"shape check: {adequacy['shape']['n_canes']} canes' sign flips cannot give p below "
+                     f"{adequacy['shape']['p_floor']:.2g}, so it cannot withhold a name at {ADEQUACY_ALPHA}")
     adequacy["inadequate"] = trend_fails or within_fails or shape_fails
     # the same trend against a plain cane permutation, blind to the shared geometry error and so
     # biased toward finding one: it names nothing and withholds nothing, it only warns
@@ -696,20 +699,33 @@ def _engine_log_k(trials, F, backend, proto, cfg0, effects, folder, executor, pr
     return _ok_log_k(res, backend, F.trial)
 
 
-def _shape_check(trials, F, base_traces, specs, backend, proto, cfg0, obstruction, outp, executor, progress,
+def _shape_check(trials, F, base_run, specs, backend, proto, cfg0, obstruction, outp, executor, progress,
                  seed) -> dict[str, Any]:
     """:func:`.shape.shape_check` of the fitted model ``specs`` (one more run of the baseline engine).
 
-    Trials with an obstruction onset are left out: their push is cut at the elbow, and what is
-    left of it says little about shape. Without effects there is nothing to check.
+    ``base_run`` is the baseline run (its traces carry the field's rows too). Trials with an
+    obstruction onset are left out (their field trace has an elbow the engines' traces lack: the
+    obstruction only shortens the fit window), and so are trials on which the baseline or the
+    model run did not end ``ok`` (a run that failed partway has a trace, but not the push's).
+    Without effects there is nothing to check.
     """
     if not specs:
         return {"p": None, "n_trials": 0, "share": SHAPE_SHARE, "reason": "no effect fitted"}
+    model = cfg0.replace(effects=tuple(specs) + obstruction)
     run = _engine_run(trials, F, backend, proto, cfg0, tuple(specs) + obstruction,
                       outp / "shape_model" if outp else None, executor, progress)
-    free = F[~np.isfinite(F.obstruction_onset_mm.to_numpy(float))]
-    shapes = trace_shapes(list(free.trial), base_traces, base_traces, run.traces, backend)
+    ok = np.isfinite(_ok_log_k(base_run.results, backend, F.trial)) & np.isfinite(_ok_log_k(run.results, backend,
+                                                                                            F.trial))
+    free = F[ok & ~np.isfinite(F.obstruction_onset_mm.to_numpy(float))]
+    cane_of = dict(zip(F.trial, F.cane))
+
+    def measured(trial: str, x_mm: np.ndarray, f_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x, f = model.applied_effects(cane_of[trial], trial).measured(x_mm * 1e-3, f_n)
+        return np.asarray(x) * 1e3, np.asarray(f)
+
+    shapes = trace_shapes(list(free.trial), base_run.traces, base_run.traces, run.traces, backend, measured)
     out = shape_check(free.cane.to_numpy(), shapes, seed=seed)
+    out["n_trials_not_ok"] = int((~ok).sum())
     out["test"] = ("one-sided: do the traces show at least the share of the fitted model's change in their "
                    "stiffening over the push (its run on the baseline engine against the baseline's)?")
     out["engine"] = backend
@@ -832,8 +848,8 @@ def write_outputs(res: DiscoveryResult, out: Path, preset: str, ci: dict) -> Non
         write_model_file(out / "model_partial.yaml", res.partial_config, preset,
                          {n["effect"]: n["ci95"] for n in res.partial if n["ci95"]},
                          {**made, "partial": "the library's best account; its names were withheld: it does not "
-                                             "scale across canes, or bend the traces, as the data do "
-                                             "(discovery.json, adequacy)"})
+                                             "scale across canes, share the stiffness along a cane, or bend the "
+                                             "traces as the data do (discovery.json, adequacy)"})
     from canebench.reports.build import build_report
     from canebench.reports.discovery import figures
 
