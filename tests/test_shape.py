@@ -140,6 +140,30 @@ def test_the_shape_check_says_when_too_few_canes_can_reach_its_level():
     assert shape_check(np.array([]), empty)["p"] is None
 
 
+def test_trace_shapes_reads_only_the_trials_asked_for():
+    """The runs' traces hold trials the workflow does not score (an unusable field trace, an
+    obstruction): the model's record (``measured``) is applied to the asked trials only, and a
+    trial without all three traces gets NaN, not an error."""
+    x = np.arange(0.5, 30.01, 0.5)
+
+    def tr(backend, trials, k):
+        return pd.DataFrame([{"trial": t, "backend": backend, "displacement_mm": xi, "force_n": k * xi}
+                             for t in trials for xi in x])
+
+    base = pd.concat([tr("beam", ["a", "b", "c"], 0.1), tr("field", ["a", "b"], 0.1)])
+    model = tr("beam", ["a", "b", "c"], 0.2)
+    seen = []
+
+    def measured(t, xm, f):
+        seen.append(t)
+        return xm + f / 0.5, f  # a rig spring in mm per N
+
+    sh = trace_shapes(["a", "b"], base, base, model, "beam", measured)
+    assert sorted(seen) == ["a", "b"] and len(sh) == 2 and np.all(np.abs(sh.kappa_base) < 1e-9)
+    sh = trace_shapes(["a", "z"], base, base, model, "beam", measured)
+    assert np.isfinite(sh.kappa_field[0]) and np.isnan(sh.kappa_field[1])
+
+
 def test_discover_withholds_a_pitch_the_traces_do_not_show(tmp_path):
     """A neighbouring cane's lateral spring support (outside the library; a linear spring, so
     linear traces) screened against the probe's pitch alone: the pitch fits much of the

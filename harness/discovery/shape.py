@@ -114,7 +114,7 @@ def trace_shapes(trials: list[str], field: pd.DataFrame, base: pd.DataFrame, mod
     if measured is not None:
         # the model's own record of a push (a rig spring: x + F / k_rig) applied to the baseline
         # engine's trace, so all three are in the rig's millimetres and one window is one push
-        bse = {t: measured(t, *xf) for t, xf in bse.items()}
+        bse = {t: measured(t, *bse[t]) for t in trials if t in bse}  # the runs hold unscored trials too
     rows = []
     for t in trials:
         row = {"trial": t, "kappa_field": math.nan, "se_field": math.nan, "kappa_base": math.nan,
