@@ -207,7 +207,7 @@ def test_the_within_cane_check_holds_its_level_with_the_caliper_line_error_and_s
     """Without a trend the check rejects at about its level although the caliper line's error
     moves each cane's low push against its high one by about 0.1 in ln (the null carries that
     error); a null of trial noise only, blind to the error's pattern along the cane, rejects
-    about twice as often (measured 0.10-0.12 at 0.05); a trend of 1 in ln per metre of push
+    about twice as often (0.127 at 0.05 against 0.053); a trend of 1 in ln per metre of push
     height (0.2 over a cane's three pushes) is seen at 0.002."""
     from canebench.discovery.adequacy import within_trend_geometry
 
