@@ -68,6 +68,8 @@ def figures(out: str | Path) -> list[Path]:
 
 def section(folder: str | Path) -> str:
     """HTML section for a folder holding ``discovery.json`` (empty string if none)."""
+    from canebench.discovery.workflow import INADEQUATE
+
     folder = Path(folder)
     f = folder / "discovery.json"
     if not f.exists():
@@ -139,7 +141,7 @@ def section(folder: str | Path) -> str:
 {g['before']['median_abs_log_ratio']:.3f} (worst {g['before']['worst_abs_log_ratio']:.3f}) before;
 {g['after_cv']['median_abs_log_ratio']:.3f} (worst {g['after_cv']['worst_abs_log_ratio']:.3f}) after, out of sample
 (leave one cane out). Share of the residual variance between canes: {bs.get('before', float('nan')):.2f} before,
-{bs.get('after_cv', float('nan')):.2f} after{' (the partial model)' if doc.get('partial') else ''}. Unexplained (residual structure, or a model that does not scale across canes, share the stiffness along a cane, or bend the traces as the data do): <b>{doc['unexplained']}</b>.
+{bs.get('after_cv', float('nan')):.2f} after{' (the partial model)' if doc.get('partial') else ''}. Unexplained (residual structure, or a model that {INADEQUATE}): <b>{doc['unexplained']}</b>.
 Selection stopped: {html.escape(doc.get('stop_reason', ''))}.</p>
 <table><tr><th>named effect</th><th>scope</th><th>parameters (95 % cane-bootstrap interval)</th></tr>{''.join(rows) or '<tr><td colspan=3>nothing named</td></tr>'}</table>
 {eng}

@@ -45,7 +45,7 @@ def main(a: argparse.Namespace) -> int:
         stem = "selftest_subset" if a.selftest_cases else "selftest"
         print(f"written: {out / (stem + '.csv')}, {out / (stem + '.json')}")
         return 0
-    from ..discovery.workflow import discover
+    from ..discovery.workflow import INADEQUATE, discover
     from ..execute.progress import Progress
 
     _, trials = common.trials(a)
@@ -71,8 +71,7 @@ def main(a: argparse.Namespace) -> int:
                 f"{k} = {v:.4g} {n['units'].get(k, '')} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}]"
                 for k, v in n["params"].items()))
     if doc.get("partial") and not any(n["scope"] == "global" for n in doc["named"]):
-        print("  named: nothing; the library's best account (partial, above) does not scale across canes, share "
-              "the stiffness along a cane, or bend the traces as the data do")
+        print(f"  named: nothing; the library's best account (partial, above) {INADEQUATE}")
     elif not doc["named"]:
         print("  named: nothing in the library explains the residual significantly")
     print(f"  stopped: {doc['stop_reason']}")

@@ -47,6 +47,19 @@ from .structure import _corr
 N_DRAWS = 2000
 
 
+def _row_corr(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pearson r of each row of ``a`` (draws, n) with ``b``: the same rows of a (draws, n) array, or one (n,)."""
+    ac = a - a.mean(axis=1, keepdims=True)
+    bc = b - b.mean(axis=-1, keepdims=True)
+    return np.sum(ac * bc, axis=1) / np.sqrt(np.sum(ac**2, axis=1) * np.sum(bc**2, axis=-1))
+
+
+def _two_sided_p(null: np.ndarray, obs: float) -> float:
+    """Two-sided Monte Carlo p of ``obs`` in the null's draws (+1 in both counts), at most 1."""
+    B = len(null)
+    return float(min(1.0, 2.0 * min((np.sum(null <= obs) + 1) / (B + 1), (np.sum(null >= obs) + 1) / (B + 1))))
+
+
 def geometry_draws(ss: ScreenSet, log_k_anchor: np.ndarray, specs: tuple[EffectSpec, ...], factor: float = 1.0,
                    n_draws: int = N_DRAWS, seed: int = 0) -> np.ndarray:
     """(n_draws, n_trials): the model's change in ln k when each cane's caliper line is off by its own error.
@@ -135,12 +148,8 @@ def level_trend_geometry(canes: np.ndarray, resid: np.ndarray, level: np.ndarray
     vl = float(np.var(lm))
     shrink = math.sqrt(max(0.0, vl - vg) / vl) if vl > 0 else 0.0
     lev = (lm.mean() + shrink * (lm - lm.mean()))[None, :] + gm
-    rc = res - res.mean(axis=1, keepdims=True)
-    lc = lev - lev.mean(axis=1, keepdims=True)
-    null = np.sum(rc * lc, axis=1) / np.sqrt(np.sum(rc**2, axis=1) * np.sum(lc**2, axis=1))
-    B = len(null)
-    p = 2.0 * min((np.sum(null <= obs) + 1) / (B + 1), (np.sum(null >= obs) + 1) / (B + 1))
-    return {"r": obs, "p": float(min(1.0, p)), "null_median": float(np.median(null)),
+    null = _row_corr(res, lev)
+    return {"r": obs, "p": _two_sided_p(null, obs), "null_median": float(np.median(null)),
             "geometry_sd": math.sqrt(vg), "geometry_bounded": bool(bounded), "n_trials_left_out": left_out,
             "n_canes": int(C)}
 
@@ -184,8 +193,9 @@ def within_trend_geometry(canes: np.ndarray, resid: np.ndarray, position: np.nda
         return out
 
     def within(a: np.ndarray) -> np.ndarray:  # deviations from each cane's mean (last axis: trials)
-        means = np.stack([np.bincount(inv, row, minlength=C) for row in np.atleast_2d(a)]) / cnt
-        return a - means[..., inv] if a.ndim > 1 else a - means[0, inv]
+        a2 = np.atleast_2d(a)
+        means = np.stack([np.bincount(inv, row, minlength=C) for row in a2]) / cnt
+        return (a2 - means[:, inv]).reshape(a.shape)
 
     rw, xw = within(resid), within(position)
     if not (np.any(xw != 0) and np.any(rw != 0)):
@@ -200,11 +210,6 @@ def within_trend_geometry(canes: np.ndarray, resid: np.ndarray, position: np.nda
         vg = s2
     rng = np.random.default_rng(seed)
     noise = within(rng.normal(0.0, math.sqrt(max(0.0, s2 - vg)), gw.shape))
-    res = noise - gw
-    xc = xw - xw.mean()
-    rc = res - res.mean(axis=1, keepdims=True)
-    null = (rc @ xc) / np.sqrt(np.sum(rc**2, axis=1) * (xc @ xc))
-    B = len(null)
-    p = 2.0 * min((np.sum(null <= obs) + 1) / (B + 1), (np.sum(null >= obs) + 1) / (B + 1))
-    out.update(r=obs, p=float(min(1.0, p)), null_sd=float(np.std(null)), geometry_bounded=bool(bounded))
+    null = _row_corr(noise - gw, xw)
+    out.update(r=obs, p=_two_sided_p(null, obs), null_sd=float(np.std(null)), geometry_bounded=bool(bounded))
     return out
