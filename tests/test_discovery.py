@@ -287,12 +287,11 @@ def test_an_anchored_screen_is_the_same_screen_moved_to_the_anchor(bundled_trial
                    EffectSpec.parse("rig_compliance(k_rig=1000)"))]:
         np.testing.assert_allclose(predict_log_k(sa, lka, specs), predict_log_k(ss, lkb, specs), rtol=0, atol=1e-10)
     # and the anchor survives subsetting (cross-validation folds) and resampling (the bootstrap)
-    from canebench.discovery.fit import _take
 
     keep = np.arange(len(ss.trials)) % 2 == 0
     np.testing.assert_allclose(predict_log_k(sa.subset(keep), lka[keep], ()), lkb[keep], rtol=0, atol=1e-10)
     rows = np.array([0, 0, 3, 5, 8])
-    tk = _take(sa, rows, np.array(["a", "a", "b", "c", "d"]))
+    tk = sa.take(rows, np.array(["a", "a", "b", "c", "d"]))
     np.testing.assert_allclose(predict_log_k(tk, lka[rows], ()), lkb[rows], rtol=0, atol=1e-10)
 
 
@@ -632,6 +631,21 @@ def test_the_selftest_draws_each_effect_once_in_every_fifth_of_its_range():
             assert sorted(int(5 * (v - lo) / (hi - lo)) for v in x) == [0, 1, 2, 3, 4], (seed, eff, x)
 
 
+def test_the_selftest_kinds_survive_a_csv_round_trip():
+    """``selftest.csv`` is read back by users with pandas' defaults, which turn the strings
+    ``null``, ``NA``, ``None``... into NaN: a kind spelled that way would vanish from
+    ``df[df.kind == ...]`` and the nulls' rows would count nowhere."""
+    import io
+
+    from canebench.discovery.selftest import suite
+
+    cases = suite(7)
+    back = pd.read_csv(io.StringIO(pd.DataFrame(cases)[["id", "kind"]].to_csv(index=False)))
+    assert back.kind.notna().all(), back[back.kind.isna()]
+    assert list(back.kind) == [c["kind"] for c in cases]
+    assert (back.kind == "no_effect").sum() == 5
+
+
 def test_a_rig_softer_than_the_cane_gives_a_smooth_trace(tmp_path):
     """The generator's series spring (x_rig = x_cane + F / k_rig) at the soft end of the
     self-test's range: 20 N/m, beside canes up to ten times stiffer. The readings' second
@@ -753,7 +767,7 @@ def test_a_flare_must_read_what_the_calipers_read(bundled_trials):
     the calipers" means (a third of the term's weight would let it reach 1.3). Every trial
     carries its own cane's calipers, through folds and resamples, and a cane counts once; a
     diameter factor scales the line, not the calipers' scatter."""
-    from canebench.discovery.fit import Candidate, _take, fit_candidate
+    from canebench.discovery.fit import Candidate, fit_candidate
     from canebench.discovery.screen import trial_geometry
     from canebench.discovery.screenset import ScreenSet, predict_log_k
     from canebench.model.effects import AppliedEffects, EffectSpec
@@ -794,7 +808,7 @@ def test_a_flare_must_read_what_the_calipers_read(bundled_trials):
     own = 0.5 * np.sum(((fx.diameter(g0.cal_s, g0.cal_line) - g0.cal_line) / ss.cal_sigma) ** 2)
     assert ss.subset(one).caliper_nll(fx) == pytest.approx(own, rel=1e-12)
     rows = np.flatnonzero(one)
-    twice = _take(ss, np.concatenate([rows, rows]), np.array(["x"] * len(rows) + ["y"] * len(rows)))
+    twice = ss.take(np.concatenate([rows, rows]), np.array(["x"] * len(rows) + ["y"] * len(rows)))
     assert twice.caliper_nll(fx) == pytest.approx(2 * own, rel=1e-12)
     assert ss.caliper_nll(AppliedEffects([EffectSpec.parse("root_compliance(k_root=20)").instance()])) == 0.0
 
@@ -999,7 +1013,6 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
                                  executor=ex).to_df(), backend, F.trial)
     assert np.max(np.abs(eng_b - predict_log_k(ss_a, lka, (b,)))) < 0.01
     # cross-validation folds and bootstrap resamples carry each trial's own row of the table
-    from canebench.discovery.fit import _take
 
     full = predict_log_k(ss_a, lka, (b,))
     keep = np.arange(len(trials)) % 3 != 0
@@ -1007,5 +1020,5 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     # another trial's row of the table would be off by the rows' difference, 1e-3 or more here
     np.testing.assert_allclose(predict_log_k(ss_a.subset(keep), lka[keep], (b,)), full[keep], rtol=0, atol=1e-12)
     rows = np.array([5, 5, 0, 11])
-    np.testing.assert_allclose(predict_log_k(_take(ss_a, rows, np.array(["a", "a", "b", "c"])), lka[rows], (b,)),
+    np.testing.assert_allclose(predict_log_k(ss_a.take(rows, np.array(["a", "a", "b", "c"])), lka[rows], (b,)),
                                full[rows], rtol=0, atol=1e-12)

@@ -350,7 +350,7 @@ def bootstrap_ci(fit: Fit, ss: ScreenSet, log_k_field: np.ndarray, log_k_base: n
         rows = np.concatenate([np.flatnonzero(ss.canes == c) for c in pick])
         # relabel repeated canes so each draw is its own group
         labels = np.concatenate([[f"{c}#{k}"] * int(np.sum(ss.canes == c)) for k, c in enumerate(pick)])
-        sub = _take(ss, rows, labels)
+        sub = ss.take(rows, labels)
         f = fit_candidate(fit.candidate, sub, log_k_field[rows], log_k_base[rows], fixed, x0=fit.x)
         vals = {(sp.name, k): v for sp in f.specs[len(fixed):] for k, v in sp.params}
         draws.append([vals[key] for key in fit.candidate.free])
@@ -359,21 +359,3 @@ def bootstrap_ci(fit: Fit, ss: ScreenSet, log_k_field: np.ndarray, log_k_base: n
     for j, key in enumerate(fit.candidate.free):
         out[key] = (float(np.percentile(arr[:, j], 2.5)), float(np.percentile(arr[:, j], 97.5)))
     return out
-
-
-def _take(ss: ScreenSet, rows: np.ndarray, labels: np.ndarray) -> ScreenSet:
-    """A ScreenSet of the given trial rows (repeats allowed) with new cane labels."""
-    pts, idx = _gather(ss.idx, rows)  # quadrature points
-    cpts, cidx = _gather(ss.cal_idx, rows)  # calipers
-    return ScreenSet([ss.trials[i] for i in rows], np.asarray(labels), idx, ss.s[pts], ss.w[pts], ss.d0[pts],
-                     ss.kaa[pts], ss.kae[pts], ss.kee[pts], ss.raa[rows], ss.rae[rows], ss.ree[rows], ss.E[rows],
-                     ss.th0[rows], ss.min_d, ss.c0[rows], ss.s0, ss.anchor, cidx, ss.cal_s[cpts],
-                     ss.cal_line[cpts], ss.cal_w[cpts], ss.cal_sigma,
-                     ss.pitch_rows(rows), ss.anchor_pitch_deg)
-
-
-def _gather(owner: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Positions of the points owned by each trial in ``rows`` (repeats allowed), and their new owners."""
-    parts = [np.flatnonzero(owner == i) for i in rows]
-    return (np.concatenate(parts).astype(int),
-            np.concatenate([np.full(len(p), k, dtype=int) for k, p in enumerate(parts)]))

@@ -145,17 +145,24 @@ class ScreenSet:
         out.c0 = out.compliance(AppliedEffects([]))[0]
         return out
 
+    def take(self, rows: np.ndarray, labels: np.ndarray | None = None) -> "ScreenSet":
+        """The trials ``rows`` (indices, in that order, repeats allowed) as a screen of their own.
+
+        ``labels``: their cane labels (default their own); a cane bootstrap gives a resampled
+        cane's repeats a label of their own, so each repeat counts as a cane.
+        """
+        rows = np.asarray(rows, int)
+        pts, idx = _gather(self.idx, rows)  # quadrature points
+        cpts, cidx = _gather(self.cal_idx, rows)  # calipers
+        return ScreenSet([self.trials[i] for i in rows], self.canes[rows] if labels is None else np.asarray(labels),
+                         idx, self.s[pts], self.w[pts], self.d0[pts], self.kaa[pts], self.kae[pts], self.kee[pts],
+                         self.raa[rows], self.rae[rows], self.ree[rows], self.E[rows], self.th0[rows], self.min_d,
+                         self.c0[rows], self.s0, self.anchor, cidx, self.cal_s[cpts], self.cal_line[cpts],
+                         self.cal_w[cpts], self.cal_sigma, self.pitch_rows(rows), self.anchor_pitch_deg)
+
     def subset(self, keep: np.ndarray) -> "ScreenSet":
-        keep = np.asarray(keep, bool)
-        new_index = np.cumsum(keep) - 1
-        pts = keep[self.idx]
-        cal = keep[self.cal_idx]
-        return ScreenSet([t for t, k in zip(self.trials, keep) if k], self.canes[keep], new_index[self.idx[pts]],
-                         self.s[pts], self.w[pts], self.d0[pts], self.kaa[pts], self.kae[pts], self.kee[pts],
-                         self.raa[keep], self.rae[keep], self.ree[keep], self.E[keep], self.th0[keep], self.min_d,
-                         self.c0[keep], self.s0, self.anchor, new_index[self.cal_idx[cal]], self.cal_s[cal],
-                         self.cal_line[cal], self.cal_w[cal], self.cal_sigma, self.pitch_rows(keep),
-                         self.anchor_pitch_deg)
+        """The trials where the mask ``keep`` is true, in their order."""
+        return self.take(np.flatnonzero(np.asarray(keep, bool)))
 
     def pitch_rows(self, rows: np.ndarray) -> np.ndarray:
         """The pitch table's rows of the trials ``rows`` (a mask or indices; empty without a table)."""
@@ -259,3 +266,12 @@ def predict_log_k(ss: ScreenSet, log_k_base: np.ndarray, specs: tuple[EffectSpec
     inv = cane * (cc / ss.c0) * np.exp(-excess) + series * M_PER_N_TO_MM_PER_N
     with np.errstate(divide="ignore", invalid="ignore"):
         return -np.log(inv)
+
+
+def _gather(owner: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions of the points owned by each trial in ``rows`` (repeats allowed), and their new owners."""
+    parts = [np.flatnonzero(owner == i) for i in rows]
+    if not parts:
+        return np.zeros(0, int), np.zeros(0, int)
+    return (np.concatenate(parts).astype(int),
+            np.concatenate([np.full(len(p), k, dtype=int) for k, p in enumerate(parts)]))

@@ -44,7 +44,8 @@ def suite(seed: int = 7, per_effect: int = 5, nulls: int = 5, pairs: int = 3, oo
         for i in range(per_effect):
             out.append({"kind": "single", "effects": {name: random_strength(name, rng, stratum=(i, per_effect))}})
     for _ in range(nulls):
-        out.append({"kind": "null", "effects": {}})
+        # not "null": pandas reads that word as NaN when selftest.csv is loaded back
+        out.append({"kind": "no_effect", "effects": {}})
     for a, b in PAIRS[:pairs]:
         # each effect of a pair from the upper part of its range: a pair asks whether two
         # visible effects are told apart, not whether a faint one is seen beside a strong one
@@ -264,7 +265,7 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "correct_rate_large_effects": float(big.correct.mean()) if len(big) else math.nan,
         "n_large_effects": int(len(big)),
         "correct_rate_all_hidden": float(df[df.kind.isin(["single", "pair"])].correct.mean()),
-        "false_names_on_nulls": int((df[df.kind == "null"].named != "none").sum()),
+        "false_names_on_nulls": int((df[df.kind == "no_effect"].named != "none").sum()),
         "pairs_both_named": int(df[df.kind == "pair"].correct.sum()),
         "n_pairs": int((df.kind == "pair").sum()),
         # pairs whose members both change stiffness by more than twice the noise beside the other
@@ -272,7 +273,7 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "n_pairs_resolvable": int(((df.kind == "pair") & _col(df, "resolvable", False)).sum()),
         "out_of_library_flagged_unexplained": int(df[df.kind == "out_of_library"].unexplained.sum()),
         # the flag's cost: raised where nothing outside the library is hidden
-        "unexplained_on_nulls": int(df[df.kind == "null"].unexplained.sum()),
+        "unexplained_on_nulls": int(df[df.kind == "no_effect"].unexplained.sum()),
         "unexplained_on_correctly_named": int(df[df.kind.isin(["single", "pair"]) & df.correct].unexplained.sum()),
         "n_correctly_named": int((df.kind.isin(["single", "pair"]) & df.correct).sum()),
         "out_of_library_misnamed": int((df[df.kind == "out_of_library"].named != "none").sum()),
