@@ -122,10 +122,19 @@ def section(folder: str | Path) -> str:
     wa = ad.get("within_after_cv") or {}
     if wa:
         wb = ad.get("within_before") or {}
+        tk = ad.get("within_taken_by")
+        taken = ""
+        if tk:
+            taken = (f", unless an unnamed library effect added beside the named ones takes the trend: "
+                     f"{html.escape(tk['effect'])} did (r = {tk['r']:.2f}, p = {tk['p']:.2g}"
+                     + (f"; {', '.join(tk['at_bound'])} at its search bound" if tk.get("at_bound") else "")
+                     + "), so the names stand and the result is flagged unexplained")
+        elif "within_tried" in ad:
+            taken = ", unless an unnamed library effect added beside the named ones takes the trend: none did"
         notes += (f"<li>within canes (held-out residual against push height along each cane, pooled; null: trial "
                   f"noise and the caliper line's error): r = {wb.get('r', float('nan')):.2f} (p = "
                   f"{wb.get('p', float('nan')):.2g}) before, r = {wa['r']:.2f} (p = {wa['p']:.2g}) after; below "
-                  f"p = {ad['alpha']} the model is called incomplete</li>")
+                  f"p = {ad['alpha']} the model is called incomplete{taken}</li>")
     sh = ad.get("shape") or {}
     if sh.get("p") is not None:
         notes += (f"<li>shape check (the traces' stiffening over the push, kappa): the fitted model changes it by "

@@ -1022,3 +1022,75 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     rows = np.array([5, 5, 0, 11])
     np.testing.assert_allclose(predict_log_k(ss_a.take(rows, np.array(["a", "a", "b", "c"])), lka[rows], (b,)),
                                full[rows], rtol=0, atol=1e-12)
+
+
+def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_takes_it(bundled_trials):
+    """The within-cane check's null carries the caliper line's random error, not the taper's
+    curvature below the calipers. An independent generator's power-law tapers (exponents drawn
+    from 0.4-2.2, two thirds convex) left every set's residual trending with push height and
+    withheld a correct modulus scale (its ds05, p = 0.0013).
+
+    (A) That mechanism on the bundled geometry: each cane's diameters a power law
+    a + b (1 - s/L)^p through its caliper line's values at the calipers (p drawn as that
+    generator drew it), modulus scale 1.5, cane offsets (0.15) and trial noise (0.03). With the
+    scale named the check fails (asserted: the premise), and ``base_flare`` takes the trend.
+    These canes are thicker than that generator's (bases 12-36 mm): the flare that takes the
+    trend is pressed to its 25 mm bound, which is recorded (``at_bound``), not refused.
+    (B) The same scale and each cane's middle and top pushes softer by (0.4, 1.1) in ln (the
+    independent generator's 2 % canker between the lower pushes gave 0, 0.42, 1.15): the check
+    fails and nothing takes it. A fifth or a tenth of that step is taken by a flare (25 mm over
+    80 mm; 7 mm over 110 mm, measured in review): three pushes a cane do not tell a moderate
+    weak zone from a fuller base, as the README states."""
+    from canebench.discovery.adequacy import geometry_draws, within_trend_geometry
+    from canebench.discovery.fit import Candidate, cross_validate
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.workflow import ADEQUACY_ALPHA, SCREENED, _within_taken_by
+    from canebench.model.chain import cane_curve
+    from canebench.model.effects import EffectSpec
+    from canebench.model.presets import PRESETS
+
+    cfg = PRESETS["beam-consistent"]
+    geoms = [trial_geometry(t, cfg) for t in bundled_trials]
+    ss = ScreenSet.build(geoms)
+    lkb = -np.log(ss.c0 * 1e3)
+    canes, height = ss.canes, np.array([g.height for g in geoms])
+    _, inv = np.unique(canes, return_inverse=True)
+    rng = np.random.default_rng(5)
+    noise = rng.normal(0, 0.15, inv.max() + 1)[inv] + rng.normal(0, 0.03, len(lkb))
+    scale = (EffectSpec.parse("modulus_scale(scale=1.5)"),)
+    named = ("modulus_scale",)
+    others = tuple(c for c in SCREENED if c not in named)
+
+    def check(lkf):
+        cv = cross_validate(Candidate.of(named), ss, lkf, lkb)
+        g = geometry_draws(ss, lkb, tuple(cv.fit.specs), seed=0)
+        return within_trend_geometry(canes, cv.residual, height, g, seed=0)
+
+    # (A) power-law tapers through each cane's caliper line
+    expo = rng.uniform(0.4, 2.2, inv.max() + 1)
+    d0 = ss.d0.copy()
+    for i, t in enumerate(bundled_trials):
+        L = cane_curve(t.cane, cfg).length
+        cs, cl = ss.cal_s[ss.cal_idx == i], ss.cal_line[ss.cal_idx == i]
+        x = lambda s: np.clip(1.0 - s / L, 0.0, 1.0) ** expo[inv[i]]  # noqa: E731
+        a, b = np.linalg.lstsq(np.column_stack([np.ones(len(cs)), x(cs)]), cl, rcond=None)[0]
+        q = ss.idx == i
+        d0[q] = a + b * x(ss.s[q])  # the line itself where the exponent is 1
+    taper = predict_log_k(ss.with_diameters(d0), lkb, scale) + noise
+    w = check(taper)
+    assert w["p"] < ADEQUACY_ALPHA, w  # the premise: the scale alone leaves the trend
+    taken, tried = _within_taken_by(others, named, ss, taper, lkb, canes, height, 1.0, w["n_trials"], 0)
+    assert taken is not None and taken["effect"] == "base_flare", tried
+    assert taken["p"] >= ADEQUACY_ALPHA and taken["at_bound"] == ["excess_mm"] and len(tried) == len(others)
+    # a spring at its stiffest adds nothing and cannot take anything
+    assert all(t["why_not"].startswith("does nothing") for t in tried if t["effect"] in ("root_compliance",
+                                                                                          "rig_compliance")), tried
+
+    # (B) a weak zone between the lower pushes
+    rank = np.array([int((height[inv == inv[i]] < height[i]).sum()) for i in range(len(height))])  # 0 = lowest
+    canker = predict_log_k(ss, lkb, scale) + noise - np.array([0.0, 0.4, 1.1])[rank]
+    w = check(canker)
+    assert w["p"] < ADEQUACY_ALPHA, w
+    taken, tried = _within_taken_by(others, named, ss, canker, lkb, canes, height, 1.0, w["n_trials"], 0)
+    assert taken is None, tried

@@ -94,6 +94,13 @@ def main(a: argparse.Namespace) -> int:
     if wa:
         print(f"  within canes (held-out residual vs push height, {wa['n_canes']} canes): r = {wa['r']:.2f} "
               f"(null spread +-{2 * wa['null_sd']:.2f}), p = {wa['p']:.3g} (alpha {doc['adequacy']['alpha']})")
+        tk = doc["adequacy"].get("within_taken_by")
+        if tk:
+            print(f"    taken by {tk['effect']} added beside the named effects (r = {tk['r']:.2f}, p = {tk['p']:.3g}"
+                  + (f"; {', '.join(tk['at_bound'])} at its search bound" if tk["at_bound"] else "")
+                  + "): the names stand, flagged unexplained")
+        elif "within_tried" in doc["adequacy"]:
+            print("    taken by no unnamed library effect added beside the named ones: the names are withheld")
     sh = doc.get("adequacy", {}).get("shape") or {}
     if sh.get("p") is not None:
         print(f"  shape (stiffening over the push): the model changes it by {sh['predicted_mean']:+.3f} (spread "
