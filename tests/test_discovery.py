@@ -1041,11 +1041,10 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     fails and nothing takes it. A fifth or a tenth of that step is taken by a flare (25 mm over
     80 mm; 7 mm over 110 mm, measured in review): three pushes a cane do not tell a moderate
     weak zone from a fuller base, as the README states."""
-    from canebench.discovery.adequacy import geometry_draws, within_trend_geometry
     from canebench.discovery.fit import Candidate, cross_validate
     from canebench.discovery.screen import trial_geometry
     from canebench.discovery.screenset import ScreenSet, predict_log_k
-    from canebench.discovery.workflow import ADEQUACY_ALPHA, SCREENED, _within_taken_by
+    from canebench.discovery.workflow import ADEQUACY_ALPHA, SCREENED, _within_taken_by, within_after
     from canebench.model.chain import cane_curve
     from canebench.model.effects import EffectSpec
     from canebench.model.presets import PRESETS
@@ -1063,9 +1062,7 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     others = tuple(c for c in SCREENED if c not in named)
 
     def check(lkf):
-        cv = cross_validate(Candidate.of(named), ss, lkf, lkb)
-        g = geometry_draws(ss, lkb, tuple(cv.fit.specs), seed=0)
-        return within_trend_geometry(canes, cv.residual, height, g, seed=0)
+        return within_after(cross_validate(Candidate.of(named), ss, lkf, lkb), ss, lkb, canes, height, 1.0, 0)
 
     # (A) power-law tapers through each cane's caliper line
     expo = rng.uniform(0.4, 2.2, inv.max() + 1)

@@ -673,6 +673,14 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     return result
 
 
+def within_after(cv: Any, ss: ScreenSet, lkb: np.ndarray, canes: np.ndarray, height: np.ndarray, factor: float,
+                 seed: int) -> dict[str, Any]:
+    """The within-cane check of a cross-validated model: its held-out residual against push height,
+    with the model's own geometry draws in the null (as ``adequacy.within_after_cv``)."""
+    g = geometry_draws(ss, lkb, tuple(cv.fit.specs), factor, seed=seed)
+    return within_trend_geometry(canes, cv.residual, height, g, seed=seed)
+
+
 def _within_taken_by(others: tuple[str, ...], current: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray,
                      lkb: np.ndarray, canes: np.ndarray, height: np.ndarray, factor: float, n_trials: int,
                      seed: int) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
@@ -710,8 +718,7 @@ def _within_taken_by(others: tuple[str, ...], current: tuple[str, ...], ss: Scre
         if idle:
             row["why_not"] = f"does nothing: {', '.join(idle)} at its bound beside the null"
         else:
-            g = geometry_draws(ss, lkb, tuple(cv.fit.specs), factor, seed=seed)
-            w = within_trend_geometry(canes, cv.residual, height, g, seed=seed)
+            w = within_after(cv, ss, lkb, canes, height, factor, seed)
             row.update(r=w["r"], p=w["p"])
             if w["n_trials"] != n_trials or not np.isfinite(w["r"]):
                 row["why_not"] = f"scored {w['n_trials']} trials of {n_trials}"
