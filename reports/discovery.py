@@ -135,6 +135,12 @@ def section(folder: str | Path) -> str:
                   f"noise and the caliper line's error): r = {wb.get('r', float('nan')):.2f} (p = "
                   f"{wb.get('p', float('nan')):.2g}) before, r = {wa['r']:.2f} (p = {wa['p']:.2g}) after; below "
                   f"p = {ad['alpha']} the model is called incomplete{taken}</li>")
+    wd = ad.get("within_dispersion") or {}
+    if wd:
+        notes += (f"<li>within-cane spread (the held-out residual's scatter between a cane's own pushes, pooled): "
+                  f"{wd['sd']:.3f} in ln k, {wd['ratio']:.1f} times what the caliper line's error alone gives "
+                  f"({wd['geometry_sd']:.3f}); beyond {wd['factor']:.3g} times (and {wd['material']:.3g} in ln k) "
+                  f"the model is called incomplete" + ("; it is" if wd["fails"] else "") + "</li>")
     sh = ad.get("shape") or {}
     if sh.get("p") is not None:
         notes += (f"<li>shape check (the traces' stiffening over the push, kappa): the fitted model changes it by "

@@ -1091,3 +1091,91 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     assert w["p"] < ADEQUACY_ALPHA, w
     taken, tried = _within_taken_by(others, named, ss, canker, lkb, canes, height, 1.0, w["n_trials"], 0)
     assert taken is None, tried
+
+
+def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_names(bundled_trials):
+    """A lateral support (a neighbouring cane as a spring) above the pushes on some canes and
+    below them on others stiffens each cane's nearest push most: the pattern along the canes
+    changes sign from cane to cane and cancels in the within-cane trend, but not in its size.
+    An independent generator's (its ds14, springs of 300-3000 N/m) left a modulus scale of 2.8
+    named and nothing flagged; its residual scattered within canes 20 times the caliper
+    line's error. (A) Power-law tapers through the caliper lines (the largest within-cane
+    spread a null reached, as in the test above) stay inside the allowance. (B) Springs of
+    500 N/m above the top push of every other cane and below the lowest push of the rest,
+    applied with the uniform cantilever's compliance at the push and the spring (each trial's
+    EI from its own stiffness), do not: the spread fails the model (10 times the line's error;
+    the trend fails here too, as the springs above stiffen more than those below, but on ds14
+    it did not, p = 0.10)."""
+    from canebench.discovery.adequacy import within_dispersion
+    from canebench.discovery.fit import Candidate, cross_validate
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.workflow import MIN_CHANGE, WITHIN_EXCESS, within_after
+    from canebench.model.chain import cane_curve
+    from canebench.model.effects import EffectSpec
+    from canebench.model.presets import PRESETS
+
+    cfg = PRESETS["beam-consistent"]
+    geoms = [trial_geometry(t, cfg) for t in bundled_trials]
+    ss = ScreenSet.build(geoms)
+    lkb = -np.log(ss.c0 * 1e3)
+    canes, height = ss.canes, np.array([g.height for g in geoms])
+    _, inv = np.unique(canes, return_inverse=True)
+    rng = np.random.default_rng(5)
+    noise = rng.normal(0, 0.15, inv.max() + 1)[inv] + rng.normal(0, 0.03, len(lkb))
+    scale = (EffectSpec.parse("modulus_scale(scale=1.5)"),)
+
+    def spread(lkf):
+        w = within_after(cross_validate(Candidate.of(("modulus_scale",)), ss, lkf, lkb), ss, lkb, canes, height,
+                         1.0, 0)
+        return w, within_dispersion(w, WITHIN_EXCESS, MIN_CHANGE)
+
+    # (A) power-law tapers through each cane's caliper line
+    expo = rng.uniform(0.4, 2.2, inv.max() + 1)
+    d0 = ss.d0.copy()
+    for i, t in enumerate(bundled_trials):
+        L = cane_curve(t.cane, cfg).length
+        cs, cl = ss.cal_s[ss.cal_idx == i], ss.cal_line[ss.cal_idx == i]
+        x = lambda s: np.clip(1.0 - s / L, 0.0, 1.0) ** expo[inv[i]]  # noqa: E731
+        a, b = np.linalg.lstsq(np.column_stack([np.ones(len(cs)), x(cs)]), cl, rcond=None)[0]
+        q = ss.idx == i
+        d0[q] = a + b * x(ss.s[q])
+    w, d = spread(predict_log_k(ss.with_diameters(d0), lkb, scale) + noise)
+    assert w["sd"] > w["geometry_sd"] > 0 and not d["fails"], d  # the tapers add spread, within the allowance
+
+    # (B) a spring above the pushes on even canes, below them on odd ones
+    c_hh = 1e-3 * np.exp(-lkb)  # m/N at the push
+    h = height
+    top = np.array([h[inv == inv[i]].max() for i in range(len(h))])
+    low = np.array([h[inv == inv[i]].min() for i in range(len(h))])
+    a = np.where(inv % 2 == 0, 1.15 * top, 0.6 * low)
+    ei = h**3 / (3.0 * c_hh)
+    c_ha = np.where(a >= h, h**2 * (3 * a - h), a**2 * (3 * h - a)) / (6.0 * ei)
+    c_aa = a**3 / (3.0 * ei)
+    k_s = 500.0
+    stiffening = np.log(c_hh / (c_hh - c_ha**2 * k_s / (1.0 + k_s * c_aa)))
+    w, d = spread(predict_log_k(ss, lkb, scale) + noise + stiffening)
+    assert d["fails"] and d["ratio"] > WITHIN_EXCESS and d["sd"] >= MIN_CHANGE, (w, d)
+    # the spread alone, not the trend: without the springs the same canes pass
+    w0, d0_ = spread(predict_log_k(ss, lkb, scale) + noise)
+    assert not d0_["fails"] and d0_["ratio"] < 2.0, d0_
+
+
+def test_within_dispersion_is_the_pooled_within_cane_spread_against_the_caliper_lines():
+    """sd and geometry_sd are pooled within-cane standard deviations (n - canes degrees of
+    freedom), checked here on residuals built with known deviations."""
+    from canebench.discovery.adequacy import within_dispersion, within_trend_geometry
+
+    canes = np.repeat(np.arange(6), 3)
+    dev = np.tile([-1.0, 0.0, 1.0], 6)  # each cane: deviations -1, 0, 1 about its mean
+    resid = 0.2 * dev + np.repeat(np.linspace(-1, 1, 6), 3)  # cane offsets drop out
+    position = np.tile([0.2, 0.4, 0.6], 6)
+    g = np.stack([0.05 * dev * (1 if b % 2 else -1) + 3.0 for b in range(20)])  # within sd 0.05 in every draw
+    w = within_trend_geometry(canes, resid, position, g)
+    dof = 18 - 6
+    assert w["sd"] == pytest.approx(math.sqrt(6 * 2 * 0.2**2 / dof))
+    assert w["geometry_sd"] == pytest.approx(math.sqrt(6 * 2 * 0.05**2 / dof))
+    d = within_dispersion(w, 3.0, 0.05)
+    assert d["ratio"] == pytest.approx(4.0) and d["fails"]
+    assert not within_dispersion(w, 5.0, 0.05)["fails"]  # inside the allowance
+    assert not within_dispersion(w, 3.0, 0.5)["fails"]  # too small to matter

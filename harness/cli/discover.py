@@ -101,6 +101,11 @@ def main(a: argparse.Namespace) -> int:
                   + "): the names stand, flagged unexplained")
         elif "within_tried" in doc["adequacy"]:
             print("    taken by no unnamed library effect added beside the named ones: the names are withheld")
+    wd = doc.get("adequacy", {}).get("within_dispersion")
+    if wd:
+        print(f"  within-cane spread of the held-out residual: {wd['sd']:.3f} in ln k, {wd['ratio']:.1f} times the "
+              f"calipers' error alone ({wd['geometry_sd']:.3f}); allowance {wd['factor']:.3g} times"
+              + (": exceeded, the names are withheld" if wd["fails"] else ""))
     sh = doc.get("adequacy", {}).get("shape") or {}
     if sh.get("p") is not None:
         print(f"  shape (stiffening over the push): the model changes it by {sh['predicted_mean']:+.3f} (spread "

@@ -180,6 +180,7 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     ad = doc.get("adequacy", {}).get("after_cv", {})
     row["adequacy_r"], row["adequacy_p"] = ad.get("r", math.nan), ad.get("p", math.nan)
     row["within_p"] = doc.get("adequacy", {}).get("within_after_cv", {}).get("p", math.nan)
+    row["within_spread_ratio"] = (doc.get("adequacy", {}).get("within_dispersion") or {}).get("ratio", math.nan)
     sh = doc.get("adequacy", {}).get("shape") or {}
     row["shape_p"] = sh["p"] if sh.get("p") is not None else math.nan
     row["shape_beta"] = sh["beta"] if sh.get("beta") is not None else math.nan
