@@ -1110,7 +1110,7 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
     from canebench.discovery.fit import Candidate, cross_validate
     from canebench.discovery.screen import trial_geometry
     from canebench.discovery.screenset import ScreenSet, predict_log_k
-    from canebench.discovery.workflow import MIN_CHANGE, WITHIN_EXCESS, within_after
+    from canebench.discovery.workflow import WITHIN_EXCESS, WITHIN_FLOOR, within_after
     from canebench.model.chain import cane_curve
     from canebench.model.effects import EffectSpec
     from canebench.model.presets import PRESETS
@@ -1128,7 +1128,7 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
     def spread(lkf):
         w = within_after(cross_validate(Candidate.of(("modulus_scale",)), ss, lkf, lkb), ss, lkb, canes, height,
                          1.0, 0)
-        return w, within_dispersion(w, WITHIN_EXCESS, MIN_CHANGE)
+        return w, within_dispersion(w, WITHIN_EXCESS, WITHIN_FLOOR)
 
     # (A) power-law tapers through each cane's caliper line
     expo = rng.uniform(0.4, 2.2, inv.max() + 1)
@@ -1155,7 +1155,7 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
     k_s = 500.0
     stiffening = np.log(c_hh / (c_hh - c_ha**2 * k_s / (1.0 + k_s * c_aa)))
     w, d = spread(predict_log_k(ss, lkb, scale) + noise + stiffening)
-    assert d["fails"] and d["ratio"] > WITHIN_EXCESS and d["sd"] >= MIN_CHANGE, (w, d)
+    assert d["fails"] and d["ratio"] > WITHIN_EXCESS and d["sd"] >= WITHIN_FLOOR, (w, d)
     # the spread alone, not the trend: without the springs the same canes pass
     w0, d0_ = spread(predict_log_k(ss, lkb, scale) + noise)
     assert not d0_["fails"] and d0_["ratio"] < 2.0, d0_

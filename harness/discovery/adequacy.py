@@ -235,8 +235,9 @@ def within_dispersion(within: dict[str, Any], factor: float, material: float) ->
     most 4.1 with a perpendicular or held probe (real: 3.0) and 5.6 with a pitched probe
     sliding in its U (a contact the library's pitch does not model); an independent
     generator's lateral support gave 20.6. ``factor`` is that allowance, and ``material`` keeps a
-    scatter too small to name from failing the model (a spread below the smallest change an
-    effect must make to be named is not an effect the model misses).
+    scatter of a few per cent, which trial noise no geometry carries makes (a probe's pitch
+    jitter), from failing the model where the line's share all but vanishes (a soft root
+    taking most of the compliance).
 
     Returns
     -------
