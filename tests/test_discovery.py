@@ -1024,6 +1024,41 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
                                full[rows], rtol=0, atol=1e-12)
 
 
+
+def _scaled_bundled_screen(bundled_trials):
+    """The bundled geometry's screen with a modulus scale of 1.5, cane offsets (0.15) and trial noise (0.03)."""
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet
+    from canebench.model.effects import EffectSpec
+    from canebench.model.presets import PRESETS
+
+    cfg = PRESETS["beam-consistent"]
+    geoms = [trial_geometry(t, cfg) for t in bundled_trials]
+    ss = ScreenSet.build(geoms)
+    lkb = -np.log(ss.c0 * 1e3)
+    canes, height = ss.canes, np.array([g.height for g in geoms])
+    _, inv = np.unique(canes, return_inverse=True)
+    rng = np.random.default_rng(5)
+    noise = rng.normal(0, 0.15, inv.max() + 1)[inv] + rng.normal(0, 0.03, len(lkb))
+    return cfg, ss, lkb, canes, height, inv, rng, noise, (EffectSpec.parse("modulus_scale(scale=1.5)"),)
+
+
+def _power_law_diameters(bundled_trials, cfg, ss, inv, rng):
+    """Each cane's diameters a power law a + b (1 - s/L)^p through its caliper line's values at the
+    calipers, p drawn from 0.4-2.2 per cane (the line itself where p is 1)."""
+    from canebench.model.chain import cane_curve
+
+    expo = rng.uniform(0.4, 2.2, inv.max() + 1)
+    d0 = ss.d0.copy()
+    for i, t in enumerate(bundled_trials):
+        L = cane_curve(t.cane, cfg).length
+        cs, cl = ss.cal_s[ss.cal_idx == i], ss.cal_line[ss.cal_idx == i]
+        x = lambda s: np.clip(1.0 - s / L, 0.0, 1.0) ** expo[inv[i]]  # noqa: E731
+        a, b = np.linalg.lstsq(np.column_stack([np.ones(len(cs)), x(cs)]), cl, rcond=None)[0]
+        q = ss.idx == i
+        d0[q] = a + b * x(ss.s[q])
+    return d0
+
 def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_takes_it(bundled_trials):
     """The within-cane check's null carries the caliper line's random error, not the taper's
     curvature below the calipers. An independent generator's power-law tapers (exponents drawn
@@ -1042,22 +1077,10 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     80 mm; 7 mm over 110 mm, measured in review): three pushes a cane do not tell a moderate
     weak zone from a fuller base, as the README states."""
     from canebench.discovery.fit import Candidate, cross_validate
-    from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.screenset import predict_log_k
     from canebench.discovery.workflow import ADEQUACY_ALPHA, SCREENED, _within_taken_by, within_after
-    from canebench.model.chain import cane_curve
-    from canebench.model.effects import EffectSpec
-    from canebench.model.presets import PRESETS
 
-    cfg = PRESETS["beam-consistent"]
-    geoms = [trial_geometry(t, cfg) for t in bundled_trials]
-    ss = ScreenSet.build(geoms)
-    lkb = -np.log(ss.c0 * 1e3)
-    canes, height = ss.canes, np.array([g.height for g in geoms])
-    _, inv = np.unique(canes, return_inverse=True)
-    rng = np.random.default_rng(5)
-    noise = rng.normal(0, 0.15, inv.max() + 1)[inv] + rng.normal(0, 0.03, len(lkb))
-    scale = (EffectSpec.parse("modulus_scale(scale=1.5)"),)
+    cfg, ss, lkb, canes, height, inv, rng, noise, scale = _scaled_bundled_screen(bundled_trials)
     named = ("modulus_scale",)
     others = tuple(c for c in SCREENED if c not in named)
 
@@ -1065,15 +1088,7 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
         return within_after(cross_validate(Candidate.of(named), ss, lkf, lkb), ss, lkb, canes, height, 1.0, 0)
 
     # (A) power-law tapers through each cane's caliper line
-    expo = rng.uniform(0.4, 2.2, inv.max() + 1)
-    d0 = ss.d0.copy()
-    for i, t in enumerate(bundled_trials):
-        L = cane_curve(t.cane, cfg).length
-        cs, cl = ss.cal_s[ss.cal_idx == i], ss.cal_line[ss.cal_idx == i]
-        x = lambda s: np.clip(1.0 - s / L, 0.0, 1.0) ** expo[inv[i]]  # noqa: E731
-        a, b = np.linalg.lstsq(np.column_stack([np.ones(len(cs)), x(cs)]), cl, rcond=None)[0]
-        q = ss.idx == i
-        d0[q] = a + b * x(ss.s[q])  # the line itself where the exponent is 1
+    d0 = _power_law_diameters(bundled_trials, cfg, ss, inv, rng)
     taper = predict_log_k(ss.with_diameters(d0), lkb, scale) + noise
     w = check(taper)
     assert w["p"] < ADEQUACY_ALPHA, w  # the premise: the scale alone leaves the trend
@@ -1108,22 +1123,10 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
     it did not, p = 0.10)."""
     from canebench.discovery.adequacy import within_dispersion
     from canebench.discovery.fit import Candidate, cross_validate
-    from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.screenset import predict_log_k
     from canebench.discovery.workflow import WITHIN_EXCESS, WITHIN_FLOOR, within_after
-    from canebench.model.chain import cane_curve
-    from canebench.model.effects import EffectSpec
-    from canebench.model.presets import PRESETS
 
-    cfg = PRESETS["beam-consistent"]
-    geoms = [trial_geometry(t, cfg) for t in bundled_trials]
-    ss = ScreenSet.build(geoms)
-    lkb = -np.log(ss.c0 * 1e3)
-    canes, height = ss.canes, np.array([g.height for g in geoms])
-    _, inv = np.unique(canes, return_inverse=True)
-    rng = np.random.default_rng(5)
-    noise = rng.normal(0, 0.15, inv.max() + 1)[inv] + rng.normal(0, 0.03, len(lkb))
-    scale = (EffectSpec.parse("modulus_scale(scale=1.5)"),)
+    cfg, ss, lkb, canes, height, inv, rng, noise, scale = _scaled_bundled_screen(bundled_trials)
 
     def spread(lkf):
         w = within_after(cross_validate(Candidate.of(("modulus_scale",)), ss, lkf, lkb), ss, lkb, canes, height,
@@ -1131,15 +1134,7 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
         return w, within_dispersion(w, WITHIN_EXCESS, WITHIN_FLOOR)
 
     # (A) power-law tapers through each cane's caliper line
-    expo = rng.uniform(0.4, 2.2, inv.max() + 1)
-    d0 = ss.d0.copy()
-    for i, t in enumerate(bundled_trials):
-        L = cane_curve(t.cane, cfg).length
-        cs, cl = ss.cal_s[ss.cal_idx == i], ss.cal_line[ss.cal_idx == i]
-        x = lambda s: np.clip(1.0 - s / L, 0.0, 1.0) ** expo[inv[i]]  # noqa: E731
-        a, b = np.linalg.lstsq(np.column_stack([np.ones(len(cs)), x(cs)]), cl, rcond=None)[0]
-        q = ss.idx == i
-        d0[q] = a + b * x(ss.s[q])
+    d0 = _power_law_diameters(bundled_trials, cfg, ss, inv, rng)
     w, d = spread(predict_log_k(ss.with_diameters(d0), lkb, scale) + noise)
     assert w["sd"] > w["geometry_sd"] > 0 and not d["fails"], d  # the tapers add spread, within the allowance
 
