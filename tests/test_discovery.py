@@ -428,6 +428,36 @@ def test_of_the_effects_that_pass_the_one_with_the_lowest_bic_is_named(tmp_path,
     assert sh["p"] > 0.05 and sh["beta"] > 0.5 and sh["predicted_mean"] > 0.05, sh
 
 
+def test_a_pair_displaces_a_single_that_mimics_its_sum(tmp_path):
+    """A soft root (41 N m/rad) with a stiffer material (scale 1.72), the strengths an independent
+    generator hid in its ds10: the two cancel in the mean (the scale alone does not lean the
+    residuals its way) and the root alone overshoots the thin canes out of sample, while a
+    flexing rig, which softens the stiff canes most as the root does, passes the first step
+    alone. Naming that single named the rig; the pair, tried beside it, has a BIC lower by more
+    than 10 and both members gain out of sample beside the other, so the pair is named, each
+    within the done-when 20 % of its truth."""
+    from canebench.canes.generate_hidden import generate_hidden
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.execute.executors import make_executor
+
+    k_root, scale = 40.8, 1.72
+    d = generate_hidden(tmp_path / "pair", 31, {"root_compliance": {"k_root": k_root}, "modulus_scale": {"scale": scale}},
+                        n_bushes=6)
+    res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+                   candidates=("modulus_scale", "root_compliance", "rig_compliance"))
+    first = res.steps[res.steps.step == 1].set_index("candidate")
+    # the premise: the rig passed every rule of the first step alone, neither member did
+    assert first.passed["rig_compliance"] and not first.passed["root_compliance"], first
+    assert not first.passed["modulus_scale"], first
+    pair = first.loc["modulus_scale+root_compliance"]
+    assert pair.chosen and pair.bic < first.bic["rig_compliance"] - 10, first
+    got = {n["effect"]: n["params"] for n in res.named}
+    assert set(got) == {"modulus_scale", "root_compliance"}, res.named
+    assert got["modulus_scale"]["scale"] == pytest.approx(scale, rel=0.2)
+    assert got["root_compliance"]["k_root"] == pytest.approx(k_root, rel=0.2)
+
+
 def test_each_hidden_effects_own_share_is_the_stiffness_without_it(tmp_path):
     """With a modulus scale and a rig spring hidden together, taking one out has closed forms:
     the rod's small-deflection stiffness is proportional to E, and the rig is a series spring."""
