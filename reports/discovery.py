@@ -147,6 +147,11 @@ def section(folder: str | Path) -> str:
                   f"{sh['predicted_mean']:+.3f} on average (spread {sh['predicted_spread']:.3f} across "
                   f"{sh['n_trials']} trials); the traces show {sh['beta']:.2f} of that change; p = {sh['p']:.2g} "
                   f"against {sh['share']:.2g} of it (below {ad['alpha']} the model is called incomplete)</li>")
+    lv = sh.get("level") or {}
+    if lv.get("mean") is not None:
+        notes += (f"<li>the traces' stiffening over the push beyond the model's, mean over {lv['n_canes']} canes: "
+                  f"{lv['mean']:+.3f}; beyond {lv['excess']:.2g} either way (p below {ad['alpha']}) the model is "
+                  f"called incomplete" + ("; it is" if lv["fails"] else "") + "</li>")
     if "partial_after_cv" in g:
         notes += (f"<li>the partial model's gap, out of sample: median {g['partial_after_cv']['median_abs_log_ratio']:.3f}"
                   f" (worst {g['partial_after_cv']['worst_abs_log_ratio']:.3f}); model_partial.yaml holds it</li>")

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from canebench.discovery.shape import shape_check, stiffening, trace_shapes
+from canebench.discovery.shape import SHAPE_FLOOR, shape_check, shape_level, stiffening, trace_shapes
 
 
 def test_stiffening_is_the_change_of_slope_over_the_mean_slope():
@@ -65,6 +65,40 @@ def test_the_shape_check_holds_its_level_and_sees_a_missing_shape_change():
     sh["kappa_model"] = sh["kappa_base"] + 0.002
     r = shape_check(canes, sh)
     assert r["p"] is None and r["beta"] is None and r["predicted_spread"] < 0.01
+
+
+def test_the_shape_level_holds_its_level_at_the_allowance_and_sees_traces_that_all_soften():
+    """The traces' mean stiffening beyond the model's: at the allowance itself (every cane's
+    traces soften by exactly 0.10 more than the model's, plus noise) the check fails at about
+    its level; softened by 0.21 (an independent generator's creeping canes) it fails always,
+    by 0.05 never (p is 1 within the allowance). The mean is over canes, each its own weighted
+    mean, so canes that disagree (half softened by 0.24, half not at all: a mean of -0.12) do
+    not fail it."""
+    rng = np.random.default_rng(3)
+
+    def table(shift, n_canes=18, per=3, noise=0.04):
+        canes = np.repeat(np.arange(n_canes), per)
+        base = rng.normal(0.01, 0.01, n_canes * per)
+        sh = pd.DataFrame({"kappa_base": base, "kappa_model": base + 0.05,
+                           "kappa_field": base + 0.05 + shift[canes] + rng.normal(0, noise, len(canes)),
+                           "se_field": rng.uniform(0.01, 0.05, len(canes))})
+        return canes, sh
+
+    at = np.array([shape_level(*table(np.full(18, -0.10)), alpha=0.05, seed=i, n_flips=2000)["p"] for i in range(300)])
+    # binomial sd of a 5 % rate over 300 tables is 1.3 %
+    assert 0.02 < np.mean(at < 0.05) < 0.09, np.mean(at < 0.05)
+    creep = [shape_level(*table(np.full(18, -0.21)), alpha=0.002, seed=i) for i in range(20)]
+    assert all(r["fails"] for r in creep) and all(r["mean"] == pytest.approx(-0.21, abs=0.03) for r in creep)
+    mild = shape_level(*table(np.full(18, 0.05)), alpha=0.002)
+    assert mild["p"] == 1.0 and not mild["fails"]
+    split = shape_level(*table(np.where(np.arange(18) % 2 == 0, -0.24, 0.0)), alpha=0.002)
+    assert split["mean"] == pytest.approx(-0.12, abs=0.02) and not split["fails"], split
+    # the mean: each cane's mean weighted by 1 / (se^2 + floor^2), then the plain mean over canes
+    canes, sh = table(np.full(18, -0.15))
+    v = (sh.kappa_field - sh.kappa_model).to_numpy()
+    w = 1.0 / (sh.se_field.to_numpy() ** 2 + SHAPE_FLOOR**2)
+    by_cane = [np.sum(w[canes == c] * v[canes == c]) / np.sum(w[canes == c]) for c in range(18)]
+    assert shape_level(canes, sh, alpha=0.002)["mean"] == pytest.approx(np.mean(by_cane), rel=1e-12)
 
 
 def test_a_pitched_probe_bends_the_engines_traces_and_the_check_sees_it_missing():

@@ -114,6 +114,11 @@ def main(a: argparse.Namespace) -> int:
     elif sh.get("predicted_spread") is not None:
         print(f"  shape: the model changes the traces' stiffening by {sh['predicted_mean']:+.3f} on average and "
               f"barely from trial to trial (spread {sh['predicted_spread']:.3f}): nothing to check")
+    lv = sh.get("level") or {}
+    if lv.get("mean") is not None:
+        print(f"  traces' stiffening over the push beyond the model's, mean over {lv['n_canes']} canes: "
+              f"{lv['mean']:+.3f} (allowance +-{lv['excess']:.2g}" + (f"; p = {lv['p']:.3g} beyond it" if lv["p"] < 1 else "")
+              + ")" + ((": exceeded" + ("; the names are withheld" if doc.get("partial") else "")) if lv["fails"] else ""))
     print(f"  unexplained (residual structure, or a model that does not fit the data's scaling or shape): "
           f"{doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")

@@ -184,6 +184,8 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     sh = doc.get("adequacy", {}).get("shape") or {}
     row["shape_p"] = sh["p"] if sh.get("p") is not None else math.nan
     row["shape_beta"] = sh["beta"] if sh.get("beta") is not None else math.nan
+    lv = (sh.get("level") or {}).get("mean")
+    row["shape_level"] = lv if lv is not None else math.nan
     row["false_names"] = "+".join(sorted(set(named) - hidden)) or ""
     # effects named and then dropped as stale by selection's backward pass
     row["dropped"] = "+".join(r["removed"] for r in doc["selection"] if r.get("removed")) or ""

@@ -59,6 +59,11 @@ SHAPE_FLOOR = 0.02
 SHARE = 0.5
 #: weighted standard deviation of D below which the model predicts no shape change worth checking
 MIN_SHAPE_SPREAD = 0.01
+#: how far the traces may stiffen or soften over the push beyond the model, on average over the
+#: canes (:func:`shape_level`): the nulls and library effects of three generators stay within
+#: 0.03 (how each places contact, its rig, its probe); a creeping material softens them by 0.21,
+#: a pitched probe that slides along the cane by 0.36 (README, Discovery)
+SHAPE_EXCESS = 0.10
 N_FLIPS = 20000
 
 
@@ -172,4 +177,49 @@ def shape_check(canes: np.ndarray, shapes: pd.DataFrame, share: float = SHARE, s
     # one-sided toward too little of the change: P(null <= obs)
     out["p"] = flip_p(-(flips @ per_cane), -obs, exact)
     out["p_floor"] = 1.0 / len(flips) if exact else 1.0 / (len(flips) + 1)
+    return out
+
+
+def shape_level(canes: np.ndarray, shapes: pd.DataFrame, alpha: float, excess: float = SHAPE_EXCESS, seed: int = 0,
+                n_flips: int = N_FLIPS) -> dict:
+    """Do the traces stiffen (or soften) over the push, on average, more than the model lets them?
+
+    :func:`shape_check` lets the traces and the engine differ in shape by a constant and scores
+    only how the predicted change varies from trial to trial. An effect outside the library
+    can move that constant: a creeping material relaxes as the push goes on, and every trace
+    softens; a pitched probe that slides along the cane softens or stiffens every trace,
+    whichever way it is pitched, by more than a held probe does. No library effect but the
+    pitch changes a trace's shape, so the traces' stiffening beyond the fitted model's,
+    v = kappa_field - kappa_model (the baseline's when nothing is fitted), must stay within
+    ``excess`` on average. Each cane gives its weighted mean of v (weights as in
+    :func:`shape_check`); the test is one-sided beyond the allowance on the side the mean lies:
+    the cane means less ``excess`` (toward zero) are sign-flipped over the canes. Fails when
+    p < ``alpha``, which needs the mean beyond ``excess`` and the canes to agree.
+
+    Returns
+    -------
+    dict
+        ``mean`` (over canes), ``cane_sd``, ``p`` (1 when the mean lies within the allowance),
+        ``excess``, ``fails``, ``n_trials``, ``n_canes``.
+    """
+    v = (shapes.kappa_field - shapes.kappa_model).to_numpy(float)
+    se = shapes.se_field.to_numpy(float)
+    ok = np.isfinite(v) & np.isfinite(se)
+    canes, v, se = np.asarray(canes)[ok], v[ok], se[ok]
+    uniq, inv = np.unique(canes, return_inverse=True)
+    out = {"mean": None, "cane_sd": None, "p": None, "excess": excess, "alpha": alpha, "fails": False,
+           "n_trials": int(ok.sum()), "n_canes": int(len(uniq))}
+    if ok.sum() < 6 or len(uniq) < 3:
+        return out
+    w = 1.0 / (se**2 + SHAPE_FLOOR**2)
+    m = np.bincount(inv, w * v) / np.bincount(inv, w)
+    obs = float(m.mean())
+    out.update(mean=obs, cane_sd=float(m.std(ddof=1)))
+    if abs(obs) <= excess:
+        out["p"] = 1.0
+        return out
+    d = np.sign(obs) * m - excess  # beyond the allowance, on the mean's side
+    flips, exact = sign_flips(len(uniq), n_flips, seed)
+    out["p"] = flip_p(flips @ d / len(d), float(d.mean()), exact)
+    out["fails"] = bool(out["p"] < alpha)
     return out

@@ -47,7 +47,10 @@
    to cane, which cancels in the trend), and for
    a model whose predicted change in the traces' shape (a
    pitched probe's tension stiffens a trace as it goes) the traces do not show
-   (:func:`.shape.shape_check`, on one more run of the baseline engine with the fitted model).
+   (:func:`.shape.shape_check`, on one more run of the baseline engine with the fitted model),
+   and a model whose traces the field's outbend, or underbend, on average over the canes
+   beyond an allowance (:func:`.shape.shape_level`: a creeping material, a probe that slides;
+   with nothing fitted it is run on the baseline's traces and flags without names to withhold).
    Two warnings also set ``unexplained`` and leave the names
    standing: the structure table (:func:`.structure.structure_tests`) showing
    something significant, and the same level trend against a plain cane
@@ -84,7 +87,7 @@ from .fit import Candidate, bootstrap_ci, cross_validate, direction_test_p, fit_
 from .onsets import detect_early_contact, detect_onset
 from .screen import trial_geometry
 from .screenset import PITCH_GRID_DEG, ScreenSet, predict_log_k
-from .shape import SHARE as SHAPE_SHARE, shape_check, trace_shapes
+from .shape import SHARE as SHAPE_SHARE, shape_check, shape_level, trace_shapes
 from .structure import between_share, level_trend, structure_tests
 
 BASELINES = {
@@ -606,10 +609,12 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     timing["shape_s"] = time.perf_counter() - t_s
     shape_p = adequacy["shape"].get("p")
     shape_fails = shape_p is not None and shape_p < ADEQUACY_ALPHA
+    # and the traces must not stiffen or soften over the push, on average, beyond what the model does
+    shape_level_fails = bool((adequacy["shape"].get("level") or {}).get("fails"))
     if shape_p is not None and adequacy["shape"]["p_floor"] >= ADEQUACY_ALPHA:
         notes.append(f"shape check: {adequacy['shape']['n_canes']} canes' sign flips cannot give p below "
                      f"{adequacy['shape']['p_floor']:.2g}, so it cannot withhold a name at {ADEQUACY_ALPHA}")
-    if within_fails and not (trend_fails or shape_fails or dispersion_fails) and current:
+    if within_fails and not (trend_fails or shape_fails or dispersion_fails or shape_level_fails) and current:
         # the trend along the canes would be the only reason to withhold the names: if an unnamed
         # library effect takes it, it is that effect below the naming rules (a taper fuller or
         # leaner below the calipers than their line is a flare), not one outside the library
@@ -620,7 +625,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         adequacy["within_taken_by"], adequacy["within_tried"] = taken, tried
         timing["within_taken_s"] = time.perf_counter() - t_w
         within_fails = taken is None
-    adequacy["inadequate"] = trend_fails or within_fails or shape_fails or dispersion_fails
+    adequacy["inadequate"] = trend_fails or within_fails or shape_fails or dispersion_fails or shape_level_fails
     # the same trend against a plain cane permutation, blind to the shared geometry error and so
     # biased toward finding one: it names nothing and withholds nothing, it only warns
     # (``unexplained``) that the model may be incomplete
@@ -658,6 +663,12 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                        f"{sh['predicted_mean']:+.3f} on average (spread {sh['predicted_spread']:.3f} across trials) "
                        f"and the traces show {sh['beta']:.2f} of that change (p = {sh['p']:.2g} < {ADEQUACY_ALPHA} "
                        f"against {sh['share']:.2g} of it)")
+        if shape_level_fails:
+            lv = sh["level"]
+            why.append(f"does not bend the traces as much as they bend: over the push they "
+                       f"{'soften' if lv['mean'] < 0 else 'stiffen'} by {abs(lv['mean']):.3f} more than it does, on "
+                       f"average over {lv['n_canes']} canes (the allowance, {lv['excess']:.2g}, is for how a rig and an "
+                       f"engine place contact; p = {lv['p']:.2g} < {ADEQUACY_ALPHA} beyond it)")
         notes.append(f"the model ({what}) " + "; and it ".join(why) + ": an effect outside the library, or one the "
                      f"library has with the wrong scaling or shape, remains"
                      + (f"; what the library fitted ({what}) took the part of it that it could and is not named: "
@@ -848,15 +859,20 @@ def _shape_check(trials, F, base_run, specs, backend, proto, cfg0, obstruction, 
     model run did not end ``ok`` (a run that failed partway has a trace, but not the push's).
     Without effects there is nothing to check.
     """
+    no_obstruction = ~np.isfinite(F.obstruction_onset_mm.to_numpy(float))
     if not specs:
-        return {"p": None, "n_trials": 0, "share": SHAPE_SHARE, "reason": "no effect fitted"}
+        # nothing fitted: the baseline is the model, and only the traces' mean shape is checked
+        free = F[no_obstruction]
+        shapes = trace_shapes(list(free.trial), base_run.traces, base_run.traces, base_run.traces, backend)
+        return {"p": None, "n_trials": 0, "share": SHAPE_SHARE, "reason": "no effect fitted", "engine": backend,
+                "level": shape_level(free.cane.to_numpy(), shapes, ADEQUACY_ALPHA, seed=seed)}
     effects = tuple(specs) + obstruction
     model = cfg0.replace(effects=effects)
     run = _engine_run(trials, F, backend, proto, cfg0, effects, outp / "shape_model" if outp else None, executor,
                       progress)
     # F holds only trials the baseline run scored ok (a finite k_base): the model run is the one to check
     ok = np.isfinite(_ok_log_k(run.results, backend, F.trial))
-    free = F[ok & ~np.isfinite(F.obstruction_onset_mm.to_numpy(float))]
+    free = F[ok & no_obstruction]
     cane_of = dict(zip(F.trial, F.cane))
 
     def measured(trial: str, x_mm: np.ndarray, f_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -865,6 +881,7 @@ def _shape_check(trials, F, base_run, specs, backend, proto, cfg0, obstruction, 
 
     shapes = trace_shapes(list(free.trial), base_run.traces, base_run.traces, run.traces, backend, measured)
     out = shape_check(free.cane.to_numpy(), shapes, seed=seed)
+    out["level"] = shape_level(free.cane.to_numpy(), shapes, ADEQUACY_ALPHA, seed=seed)
     out["n_trials_not_ok"] = int((~ok).sum())
     out["test"] = ("one-sided: do the traces show at least the share of the fitted model's change in their "
                    "stiffening over the push (its run on the baseline engine against the baseline's)?")
