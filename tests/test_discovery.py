@@ -452,6 +452,12 @@ def test_a_pair_displaces_a_single_that_mimics_its_sum(tmp_path):
     assert not first.passed["modulus_scale"], first
     pair = first.loc["modulus_scale+root_compliance"]
     assert pair.chosen and pair.bic < first.bic["rig_compliance"] - 10, first
+    # each member gains out of sample beside the other alone, well beyond the 5 % asked: the root
+    # alone misses the thin canes' level, the scale alone the thick canes' root
+    # (the rule asks 5 % of the other's own held-out mean |ln| per cane: the baseline's less its gain)
+    l1_base = pair.cv_gain_per_cane / pair.cv_relative_gain
+    for m, o in (("modulus_scale", "root_compliance"), ("root_compliance", "modulus_scale")):
+        assert pair.gain_beside_other[m] > 0.2 * (l1_base - first.cv_gain_per_cane[o]), (m, first)
     got = {n["effect"]: n["params"] for n in res.named}
     assert set(got) == {"modulus_scale", "root_compliance"}, res.named
     assert got["modulus_scale"]["scale"] == pytest.approx(scale, rel=0.2)
