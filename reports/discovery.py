@@ -68,6 +68,7 @@ def figures(out: str | Path) -> list[Path]:
 
 def section(folder: str | Path) -> str:
     """HTML section for a folder holding ``discovery.json`` (empty string if none)."""
+    from canebench.discovery.checks_text import adequacy_lines
     from canebench.discovery.workflow import INADEQUATE
 
     folder = Path(folder)
@@ -108,50 +109,7 @@ def section(folder: str | Path) -> str:
                   f"{max(a['engine_minus_screen_max_abs'] for a in anc):.3g} in ln k, at the last by "
                   f"{last['engine_minus_screen_max_abs']:.3g}</li>")
     bs = doc.get("between_cane_share", {})
-    ad = doc.get("adequacy") or {}
-    if ad.get("after_cv"):
-        b, a = ad["before"], ad["after_cv"]
-        notes += (f"<li>adequacy ({html.escape(ad['test'])}): r = {b['r']:.2f} (p = {b['p']:.2g}) before, "
-                  f"r = {a['r']:.2f} (p = {a['p']:.2g}) after, over {a['n_canes']} canes; the calipers' own error "
-                  f"alone gives r about {a.get('null_median', float('nan')):.2f}"
-                  + ("; the calipers' scatter exceeds what the residuals allow, so the null gives the line error all "
-                     "of the between-cane spread (its most lenient form)" if a.get("geometry_bounded") else "")
-                  + f"; below p = {ad['alpha']} the model is called incomplete"
-                  + ("; it is: its effects are reported as partial, not named" if doc.get("partial") else "")
-                  + "</li>")
-    wa = ad.get("within_after_cv") or {}
-    if wa:
-        wb = ad.get("within_before") or {}
-        tk = ad.get("within_taken_by")
-        taken = ""
-        if tk:
-            taken = (f", unless an unnamed library effect added beside the named ones takes the trend: "
-                     f"{html.escape(tk['effect'])} did (r = {tk['r']:.2f}, p = {tk['p']:.2g}"
-                     + (f"; {', '.join(tk['at_bound'])} at its search bound" if tk.get("at_bound") else "")
-                     + "), so the names stand and the result is flagged unexplained")
-        elif "within_tried" in ad:
-            taken = ", unless an unnamed library effect added beside the named ones takes the trend: none did"
-        notes += (f"<li>within canes (held-out residual against push height along each cane, pooled; null: trial "
-                  f"noise and the caliper line's error): r = {wb.get('r', float('nan')):.2f} (p = "
-                  f"{wb.get('p', float('nan')):.2g}) before, r = {wa['r']:.2f} (p = {wa['p']:.2g}) after; below "
-                  f"p = {ad['alpha']} the model is called incomplete{taken}</li>")
-    wd = ad.get("within_dispersion") or {}
-    if wd:
-        notes += (f"<li>within-cane spread (the held-out residual's scatter between a cane's own pushes, pooled): "
-                  f"{wd['sd']:.3f} in ln k, {wd['ratio']:.1f} times what the caliper line's error alone gives "
-                  f"({wd['geometry_sd']:.3f}); beyond {wd['factor']:.3g} times (and {wd['material']:.3g} in ln k) "
-                  f"the model is called incomplete" + ("; it is" if wd["fails"] else "") + "</li>")
-    sh = ad.get("shape") or {}
-    if sh.get("p") is not None:
-        notes += (f"<li>shape check (the traces' stiffening over the push, kappa): the fitted model changes it by "
-                  f"{sh['predicted_mean']:+.3f} on average (spread {sh['predicted_spread']:.3f} across "
-                  f"{sh['n_trials']} trials); the traces show {sh['beta']:.2f} of that change; p = {sh['p']:.2g} "
-                  f"against {sh['share']:.2g} of it (below {ad['alpha']} the model is called incomplete)</li>")
-    lv = sh.get("level") or {}
-    if lv.get("mean") is not None:
-        notes += (f"<li>the traces' stiffening over the push beyond the model's, mean over {lv['n_canes']} canes: "
-                  f"{lv['mean']:+.3f}; beyond {lv['excess']:.2g} either way (p below {ad['alpha']}) the model is "
-                  f"called incomplete" + ("; it is" if lv["fails"] else "") + "</li>")
+    notes += "".join(f"<li>{html.escape(line)}</li>" for line in adequacy_lines(doc))
     if "partial_after_cv" in g:
         notes += (f"<li>the partial model's gap, out of sample: median {g['partial_after_cv']['median_abs_log_ratio']:.3f}"
                   f" (worst {g['partial_after_cv']['worst_abs_log_ratio']:.3f}); model_partial.yaml holds it</li>")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 import math
 from pathlib import Path
@@ -377,7 +378,13 @@ def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root
     assert first["step"] == 1 and first["n_failed"] == 0 and 1e-4 < first["engine_minus_screen_max_abs"] < 0.05
     cfg = load_model_file(out / "model.yaml")
     assert [e.name for e in cfg.effects] == ["root_compliance"]
-    assert (out / "report.html").read_text().count("Discovery") >= 1
+    report = (out / "report.html").read_text()
+    assert report.count("Discovery") >= 1
+    # the report lists every adequacy check the result holds, in the words the CLI prints
+    from canebench.discovery.checks_text import adequacy_lines
+
+    lines = adequacy_lines(doc)
+    assert len(lines) >= 4 and all(html.escape(line) in report for line in lines)
     assert len(res.to_df()) == 54
 
 
@@ -1210,3 +1217,68 @@ def test_within_dispersion_is_the_pooled_within_cane_spread_against_the_caliper_
     assert d["ratio"] == pytest.approx(4.0) and d["fails"]
     assert not within_dispersion(w, 5.0, 0.05)["fails"]  # inside the allowance
     assert not within_dispersion(w, 3.0, 0.5)["fails"]  # too small to matter
+
+
+def test_within_dispersion_leaves_out_one_cane_in_ten_not_an_effect_along_every_cane():
+    """The pooled spread leaves out the tenth of canes that scatter most (adequacy.TRIM_SHARE).
+
+    Our self-test's obstruction sets (seed 7, sets 25-27) each held one trial that an
+    obstruction engaged from contact made 5-11 times stiffer (no elbow to find): its cane
+    alone lifted the pooled spread to 16-23 times the caliper line's. Here 15 canes of 3
+    pushes with trial noise 0.03 in ln k and a geometry error of 0.02: (A) one push 6 times
+    stiffer (ln 6 = 1.79) leaves the trimmed spread at the noise (within 40 %: 26 degrees of
+    freedom give the pooled sd a relative error of about 14 %, so 40 % is nearly 3 of those)
+    and the model passes, while over every cane it would fail; (B) two such canes are more
+    than the trim takes, and fail; (C) a scatter of 0.3 on every cane (a neighbour's support
+    on each) fails trimmed or not."""
+    from canebench.discovery.adequacy import within_dispersion, within_trend_geometry
+    from canebench.discovery.workflow import WITHIN_EXCESS, WITHIN_FLOOR
+
+    rng = np.random.default_rng(3)
+    C, per, noise, geo = 15, 3, 0.03, 0.02
+    canes = np.repeat(np.arange(C), per)
+    position = np.tile([0.2, 0.4, 0.6], C)
+    g = 0.5 + rng.normal(0.0, geo, (400, C * per))
+    base = rng.normal(0.0, noise, C * per) + np.repeat(rng.normal(0.0, 0.3, C), per)
+
+    def check(resid):
+        w = within_trend_geometry(canes, resid, position, g)
+        whole = {"sd": w["sd_all"], "geometry_sd": w["geometry_sd_all"]}
+        return w, within_dispersion(w, WITHIN_EXCESS, WITHIN_FLOOR), within_dispersion(whole, WITHIN_EXCESS,
+                                                                                       WITHIN_FLOOR)
+
+    one = base.copy()
+    one[3 * 7 + 1] += math.log(6.0)
+    w, d, d_all = check(one)
+    assert w["sd_trimmed_canes"] == ["7"], w  # the outlier's cane
+    assert abs(w["sd"] / noise - 1.0) < 0.4 and not d["fails"], (w, d)
+    assert d_all["fails"] and w["sd_all"] > 0.25, d_all
+    two = one.copy()
+    two[3 * 11] += math.log(6.0)
+    assert check(two)[1]["fails"]
+    every = base + 0.3 * rng.choice([-1.0, 1.0], C * per)
+    w, d, _ = check(every)
+    assert d["fails"] and w["sd"] > 0.2, (w, d)
+
+
+def test_the_adequacy_lines_say_which_check_failed_and_which_canes_the_spread_left_out():
+    """The CLI and the report word the checks once (checks_text); a failed check says so."""
+    from canebench.discovery.checks_text import adequacy_lines
+
+    doc = {"partial": [{"effect": "modulus_scale"}],
+           "adequacy": {"alpha": 0.002,
+                        "within_after_cv": {"r": 0.1, "p": 0.3, "null_sd": 0.1, "n_canes": 15, "sd_all": 0.319,
+                                            "sd_trimmed_canes": ["b5c3"]},
+                        "within_dispersion": {"sd": 0.024, "geometry_sd": 0.019, "ratio": 1.27, "factor": 8.0,
+                                              "material": 0.06, "fails": False},
+                        "shape": {"p": None, "predicted_spread": 0.002, "predicted_mean": 0.0,
+                                  "level": {"mean": -0.37, "p": 5e-5, "excess": 0.15, "n_canes": 18,
+                                            "fails": True}}}}
+    lines = adequacy_lines(doc)
+    assert len(lines) == 5, lines  # within trend, spread, shape (nothing to check), level, the verdict
+    spread = next(line for line in lines if line.startswith("within-cane spread"))
+    assert "b5c3" in spread and "0.319" in spread and not spread.endswith("it is")
+    level = next(line for line in lines if "beyond the model's" in line)
+    assert "-0.370" in level and level.endswith("it is")
+    assert "partial, not named" in lines[-1]
+    assert adequacy_lines({"adequacy": {}}) == []

@@ -45,6 +45,7 @@ def main(a: argparse.Namespace) -> int:
         stem = "selftest_subset" if a.selftest_cases else "selftest"
         print(f"written: {out / (stem + '.csv')}, {out / (stem + '.json')}")
         return 0
+    from ..discovery.checks_text import adequacy_lines
     from ..discovery.workflow import INADEQUATE, discover
     from ..execute.progress import Progress
 
@@ -85,40 +86,8 @@ def main(a: argparse.Namespace) -> int:
         print(f"  {b:10s} ({v.get('model', 'named')} model) before {v['before_median']:.3f}  after {v['after_median']:.3f} (in sample)  "
               f"{v['after_cv_median']:.3f} (out of sample)  screen vs engine {v['screen_vs_engine_max']:.2g} "
               f"(linear screen alone {v.get('linear_screen_vs_engine_max', float('nan')):.2g})")
-    ad = doc.get("adequacy", {}).get("after_cv")
-    if ad:
-        print(f"  adequacy (held-out residual vs the model's stiffness level, between {ad['n_canes']} canes): "
-              f"r = {ad['r']:.2f} (the calipers' own error alone: {ad.get('null_median', float('nan')):.2f}), "
-              f"p = {ad['p']:.3g} (alpha {doc['adequacy']['alpha']})")
-    wa = doc.get("adequacy", {}).get("within_after_cv")
-    if wa:
-        print(f"  within canes (held-out residual vs push height, {wa['n_canes']} canes): r = {wa['r']:.2f} "
-              f"(null spread +-{2 * wa['null_sd']:.2f}), p = {wa['p']:.3g} (alpha {doc['adequacy']['alpha']})")
-        tk = doc["adequacy"].get("within_taken_by")
-        if tk:
-            print(f"    taken by {tk['effect']} added beside the named effects (r = {tk['r']:.2f}, p = {tk['p']:.3g}"
-                  + (f"; {', '.join(tk['at_bound'])} at its search bound" if tk["at_bound"] else "")
-                  + "): the names stand, flagged unexplained")
-        elif "within_tried" in doc["adequacy"]:
-            print("    taken by no unnamed library effect added beside the named ones: the names are withheld")
-    wd = doc.get("adequacy", {}).get("within_dispersion")
-    if wd:
-        print(f"  within-cane spread of the held-out residual: {wd['sd']:.3f} in ln k, {wd['ratio']:.1f} times the "
-              f"calipers' error alone ({wd['geometry_sd']:.3f}); allowance {wd['factor']:.3g} times"
-              + (": exceeded, the names are withheld" if wd["fails"] else ""))
-    sh = doc.get("adequacy", {}).get("shape") or {}
-    if sh.get("p") is not None:
-        print(f"  shape (stiffening over the push): the model changes it by {sh['predicted_mean']:+.3f} (spread "
-              f"{sh['predicted_spread']:.3f}), the traces show {sh['beta']:.2f} of that; p = {sh['p']:.3g} against "
-              f"{sh['share']:.2g} of it (alpha {doc['adequacy']['alpha']})")
-    elif sh.get("predicted_spread") is not None:
-        print(f"  shape: the model changes the traces' stiffening by {sh['predicted_mean']:+.3f} on average and "
-              f"barely from trial to trial (spread {sh['predicted_spread']:.3f}): nothing to check")
-    lv = sh.get("level") or {}
-    if lv.get("mean") is not None:
-        print(f"  traces' stiffening over the push beyond the model's, mean over {lv['n_canes']} canes: "
-              f"{lv['mean']:+.3f} (allowance +-{lv['excess']:.2g}" + (f"; p = {lv['p']:.3g} beyond it" if lv["p"] < 1 else "")
-              + ")" + ((": exceeded" + ("; the names are withheld" if doc.get("partial") else "")) if lv["fails"] else ""))
+    for line in adequacy_lines(doc):
+        print(f"  {line}")
     print(f"  unexplained (residual structure, or a model that does not fit the data's scaling or shape): "
           f"{doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")

@@ -46,6 +46,9 @@ from .screenset import ScreenSet, predict_log_k
 from .structure import _corr
 
 N_DRAWS = 2000
+#: the share of canes (rounded down) whose residual scatters most, left out of the pooled
+#: within-cane spreads :func:`within_dispersion` compares (see :func:`_trimmed_spreads`)
+TRIM_SHARE = 0.1
 
 
 def _row_corr(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -183,7 +186,8 @@ def within_trend_geometry(canes: np.ndarray, resid: np.ndarray, position: np.nda
         ``n_trials``, ``n_canes``; and the two spreads :func:`within_dispersion` compares:
         ``sd``, the residual's pooled within-cane standard deviation (n - canes degrees of
         freedom), and ``geometry_sd``, the same of the caliper line's error alone (the draws',
-        before any bound).
+        before any bound), both over the canes :func:`_trimmed_spreads` keeps (those it leaves
+        out in ``sd_trimmed_canes``); ``sd_all`` and ``geometry_sd_all`` over every cane.
     """
     ok = np.isfinite(resid) & np.isfinite(position) & np.all(np.isfinite(g), axis=0)
     canes, resid, position, g = np.asarray(canes)[ok], resid[ok], position[ok], g[:, ok]
@@ -205,7 +209,7 @@ def within_trend_geometry(canes: np.ndarray, resid: np.ndarray, position: np.nda
     s2 = float(rw @ rw) / dfw
     gw = np.tile(within(g), (max(1, int(reuse)), 1))
     vg = float(np.mean(np.sum(gw**2, axis=1))) / dfw
-    out.update(sd=math.sqrt(s2), geometry_sd=math.sqrt(vg))
+    out.update(_trimmed_spreads(uniq, inv, cnt, rw, gw), sd_all=math.sqrt(s2), geometry_sd_all=math.sqrt(vg))
     if not (np.any(xw != 0) and np.any(rw != 0)):
         return out
     obs = _corr(rw, xw)
@@ -220,6 +224,34 @@ def within_trend_geometry(canes: np.ndarray, resid: np.ndarray, position: np.nda
     return out
 
 
+def _trimmed_spreads(uniq: np.ndarray, inv: np.ndarray, cnt: np.ndarray, rw: np.ndarray, gw: np.ndarray) -> dict[str, Any]:
+    """Pooled within-cane spreads of the residual and of the geometry draws, the worst canes left out.
+
+    The library holds a per-trial effect that can be invisible: an obstruction engaged from
+    contact leaves no elbow to find, only one push reading several times stiffer than its
+    cane's others. One such trial lifted our self-test's pooled spread 16-23 times the
+    calipers' (seed 7, obstruction sets 25-27, one trial each), which no model of the cane
+    can be blamed for. So the :data:`TRIM_SHARE` of canes (at least one once there are ten)
+    whose residual scatters most are left out of both pools (residual and geometry alike, so
+    the ratio compares the same canes); an effect that acts along every cane (a neighbour's
+    lateral support, 20.6 times on an independent generator's data) is untouched by it.
+    """
+    C = len(cnt)
+    ss = np.bincount(inv, rw**2, minlength=C)
+    n_trim = int(C * TRIM_SHARE)
+    drop = np.argsort(ss)[::-1][:n_trim] if n_trim else np.array([], int)
+    keep = np.ones(C, bool)
+    keep[drop] = False
+    dfk = float(np.sum(cnt[keep]) - np.sum(keep))
+    if dfk < 4:  # too few pushes left: use every cane
+        keep[:], drop = True, np.array([], int)
+        dfk = float(np.sum(cnt) - C)
+    kt = keep[inv]
+    return {"sd": math.sqrt(float(np.sum(ss[keep])) / dfk),
+            "geometry_sd": math.sqrt(float(np.mean(np.sum(gw[:, kt] ** 2, axis=1))) / dfk),
+            "sd_trimmed_canes": [str(uniq[i]) for i in drop]}
+
+
 def within_dispersion(within: dict[str, Any], factor: float, material: float) -> dict[str, Any]:
     """Does the residual scatter between a cane's own pushes more than the model's errors can make it?
 
@@ -230,11 +262,14 @@ def within_dispersion(within: dict[str, Any], factor: float, material: float) ->
     shows as size: the residual's within-cane spread ``sd`` far beyond what the geometry's
     error puts there. The caliper line's error alone (``geometry_sd``) is a lower bound of
     that: a taper that curves below the lowest caliper adds to it and the calipers do not
-    see it. Across the nulls and library effects of three generators (power-law tapers of
-    exponent 0.4-2.2 among them) and the real field trials the ratio sd / geometry_sd was at
-    most 4.1 with a perpendicular or held probe (real: 3.0) and 5.6 with a pitched probe
-    sliding in its U (a contact the library's pitch does not model); an independent
-    generator's lateral support gave 20.6. ``factor`` is that allowance, and ``material`` keeps a
+    see it. Both spreads are pooled over the canes :func:`_trimmed_spreads` keeps (one
+    obstructed push must not condemn the model). Across the nulls and library effects of three
+    generators (power-law tapers of exponent 0.4-2.2 among them) and the real field trials the
+    ratio sd / geometry_sd over every cane was at most 4.1 with a perpendicular or held probe
+    (real: 3.0) and 5.6 with a pitched probe sliding in its U (a contact the library's pitch
+    does not model); an independent generator's lateral support gave 20.6. Trimmed, the
+    independent generator's sets reach 3.6 and 5.0, the real trials 2.8, its lateral support
+    18.7. ``factor`` is that allowance, and ``material`` keeps a
     scatter of a few per cent, which trial noise no geometry carries makes (a probe's pitch
     jitter), from failing the model where the line's share all but vanishes (a soft root
     taking most of the compliance).

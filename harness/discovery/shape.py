@@ -134,6 +134,23 @@ def trace_shapes(trials: list[str], field: pd.DataFrame, base: pd.DataFrame, mod
     return pd.DataFrame(rows, columns=COLUMNS)
 
 
+def _weighted_rows(canes: np.ndarray, shapes: pd.DataFrame, *values: pd.Series) -> tuple[np.ndarray, ...]:
+    """(canes, weights, *values) over the rows where every value and the field's error are finite.
+
+    A trial weighs 1 / (se_field^2 + SHAPE_FLOOR^2): a long, clean trace counts more, but no
+    trace more than two faithful descriptions of one push can agree (:data:`SHAPE_FLOOR`).
+    """
+    se = shapes.se_field.to_numpy(float)
+    vals = [np.asarray(v, float) for v in values]
+    ok = np.isfinite(se) & np.logical_and.reduce([np.isfinite(v) for v in vals])
+    return (np.asarray(canes)[ok], 1.0 / (se[ok] ** 2 + SHAPE_FLOOR**2), *(v[ok] for v in vals))
+
+
+def _p_floor(flips: np.ndarray, exact: bool) -> float:
+    """The smallest p the canes' sign flips can give (exact enumeration, or drawn plus the observed)."""
+    return 1.0 / len(flips) if exact else 1.0 / (len(flips) + 1)
+
+
 def shape_check(canes: np.ndarray, shapes: pd.DataFrame, share: float = SHARE, seed: int = 0,
                 n_flips: int = N_FLIPS) -> dict:
     """One-sided test that the traces show at least ``share`` of the model's predicted shape change.
@@ -154,16 +171,12 @@ def shape_check(canes: np.ndarray, shapes: pd.DataFrame, share: float = SHARE, s
         ``predicted_mean`` and ``shown_mean`` (weighted means of D and u), ``n_trials``,
         ``n_canes``, ``share``.
     """
-    D = (shapes.kappa_model - shapes.kappa_base).to_numpy(float)
-    u = (shapes.kappa_field - shapes.kappa_base).to_numpy(float)
-    se = shapes.se_field.to_numpy(float)
-    ok = np.isfinite(D) & np.isfinite(u) & np.isfinite(se)
-    canes, D, u, se = np.asarray(canes)[ok], D[ok], u[ok], se[ok]
+    canes, w, D, u = _weighted_rows(canes, shapes, shapes.kappa_model - shapes.kappa_base,
+                                    shapes.kappa_field - shapes.kappa_base)
     out = {"p": None, "p_floor": None, "beta": None, "predicted_spread": None, "predicted_mean": None,
-           "shown_mean": None, "n_trials": int(ok.sum()), "n_canes": int(len(np.unique(canes))), "share": share}
-    if ok.sum() < 6 or out["n_canes"] < 3:
+           "shown_mean": None, "n_trials": int(len(w)), "n_canes": int(len(np.unique(canes))), "share": share}
+    if len(w) < 6 or out["n_canes"] < 3:
         return out
-    w = 1.0 / (se**2 + SHAPE_FLOOR**2)
     Dm, um = float(np.average(D, weights=w)), float(np.average(u, weights=w))
     Dc, uc = D - Dm, u - um
     spread = math.sqrt(float(np.average(Dc**2, weights=w)))
@@ -177,7 +190,7 @@ def shape_check(canes: np.ndarray, shapes: pd.DataFrame, share: float = SHARE, s
     flips, exact = sign_flips(len(uniq), n_flips, seed)
     # one-sided toward too little of the change: P(null <= obs)
     out["p"] = flip_p(-(flips @ per_cane), -obs, exact)
-    out["p_floor"] = 1.0 / len(flips) if exact else 1.0 / (len(flips) + 1)
+    out["p_floor"] = _p_floor(flips, exact)
     return out
 
 
@@ -206,20 +219,16 @@ def shape_level(canes: np.ndarray, shapes: pd.DataFrame, alpha: float, excess: f
         the mean lies is two one-sided tests: at most twice ``alpha`` in the worst case, about
         ``alpha`` where the allowance is large beside the canes' scatter.
     """
-    v = (shapes.kappa_field - shapes.kappa_model).to_numpy(float)
-    se = shapes.se_field.to_numpy(float)
-    ok = np.isfinite(v) & np.isfinite(se)
-    canes, v, se = np.asarray(canes)[ok], v[ok], se[ok]
+    canes, w, v = _weighted_rows(canes, shapes, shapes.kappa_field - shapes.kappa_model)
     uniq, inv = np.unique(canes, return_inverse=True)
     out = {"mean": None, "cane_sd": None, "p": None, "p_floor": None, "excess": excess, "alpha": alpha, "fails": False,
-           "n_trials": int(ok.sum()), "n_canes": int(len(uniq))}
-    if ok.sum() < 6 or len(uniq) < 3:
+           "n_trials": int(len(w)), "n_canes": int(len(uniq))}
+    if len(w) < 6 or len(uniq) < 3:
         return out
-    w = 1.0 / (se**2 + SHAPE_FLOOR**2)
     m = np.bincount(inv, w * v) / np.bincount(inv, w)
     obs = float(m.mean())
     flips, exact = sign_flips(len(uniq), n_flips, seed)
-    out.update(mean=obs, cane_sd=float(m.std(ddof=1)), p_floor=1.0 / len(flips) if exact else 1.0 / (len(flips) + 1))
+    out.update(mean=obs, cane_sd=float(m.std(ddof=1)), p_floor=_p_floor(flips, exact))
     if abs(obs) <= excess:
         out["p"] = 1.0
         return out

@@ -1,0 +1,78 @@
+"""The adequacy checks of a discovery result, one plain sentence each, for the CLI and the report.
+
+Both print the same checks from ``discovery.json`` (:meth:`.workflow.DiscoveryResult.to_json`),
+so they are worded once, here: the CLI indents the lines, the report escapes them into a
+list. The reasons a model is withheld, written into the result's own notes when a check
+fails, say more and live with the workflow that decides.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+NAN = math.nan
+
+
+def adequacy_lines(doc: dict[str, Any]) -> list[str]:
+    """One sentence per adequacy check in ``doc["adequacy"]``, in the order the workflow runs them.
+
+    Checks the result does not hold (an older file, too few canes) are left out.
+    """
+    ad = doc.get("adequacy") or {}
+    alpha = ad.get("alpha")
+    withheld = bool(doc.get("partial"))
+    lines: list[str] = []
+    a = ad.get("after_cv")
+    if a:
+        b = ad.get("before") or {}
+        lines.append(f"adequacy (held-out residual against the model's stiffness level, between {a['n_canes']} canes; "
+                     f"null: the caliper line's shared error): r = {b.get('r', NAN):.2f} (p = {b.get('p', NAN):.2g}) "
+                     f"before, r = {a['r']:.2f} (p = {a['p']:.2g}) after; the calipers' own error alone gives r about "
+                     f"{a.get('null_median', NAN):.2f}"
+                     + ("; their scatter exceeds what the residuals allow, so the null gives the line error all of "
+                        "the between-cane spread (its most lenient form)" if a.get("geometry_bounded") else "")
+                     + f"; below p = {alpha} the model is called incomplete")
+    wa = ad.get("within_after_cv")
+    if wa:
+        wb = ad.get("within_before") or {}
+        tk = ad.get("within_taken_by")
+        taken = ""
+        if tk:
+            taken = (f"; taken by {tk['effect']} added beside the named effects (r = {tk['r']:.2f}, p = "
+                     f"{tk['p']:.2g}" + (f"; {', '.join(tk['at_bound'])} at its search bound" if tk.get("at_bound")
+                                         else "") + "): the names stand, flagged unexplained")
+        elif "within_tried" in ad:
+            taken = "; taken by no unnamed library effect added beside the named ones: the names are withheld"
+        lines.append(f"within canes (held-out residual against push height along each cane, {wa['n_canes']} canes; "
+                     f"null: trial noise and the caliper line's error): r = {wb.get('r', NAN):.2f} (p = "
+                     f"{wb.get('p', NAN):.2g}) before, r = {wa['r']:.2f} (null spread +-{2 * wa['null_sd']:.2f}, "
+                     f"p = {wa['p']:.2g}) after; below p = {alpha} the model is called incomplete{taken}")
+    wd = ad.get("within_dispersion")
+    if wd:
+        trimmed = (wa or {}).get("sd_trimmed_canes") or []
+        lines.append("within-cane spread of the held-out residual (pooled over canes"
+                     + (f", leaving out the {len(trimmed)} that scatter most ({', '.join(trimmed)}; all canes: "
+                        f"{wa.get('sd_all', NAN):.3f})" if trimmed else "")
+                     + f"): {wd['sd']:.3f} in ln k, {wd['ratio']:.1f} times the caliper line's error alone "
+                     f"({wd['geometry_sd']:.3f}); beyond {wd['factor']:.3g} times (and {wd['material']:.3g} in ln k) "
+                     f"the model is called incomplete" + ("; it is" if wd["fails"] else ""))
+    sh = ad.get("shape") or {}
+    if sh.get("p") is not None:
+        lines.append(f"shape (the traces' stiffening over the push): the fitted model changes it by "
+                     f"{sh['predicted_mean']:+.3f} on average (spread {sh['predicted_spread']:.3f} across "
+                     f"{sh['n_trials']} trials), the traces show {sh['beta']:.2f} of that change; p = {sh['p']:.2g} "
+                     f"against {sh['share']:.2g} of it (below {alpha} the model is called incomplete)")
+    elif sh.get("predicted_spread") is not None:
+        lines.append(f"shape: the model changes the traces' stiffening by {sh['predicted_mean']:+.3f} on average and "
+                     f"barely from trial to trial (spread {sh['predicted_spread']:.3f}): nothing to check")
+    lv = sh.get("level") or {}
+    if lv.get("mean") is not None:
+        lines.append(f"the traces' stiffening over the push beyond the model's, mean over {lv['n_canes']} canes: "
+                     f"{lv['mean']:+.3f} (allowance +-{lv['excess']:.2g}"
+                     + (f"; p = {lv['p']:.2g} beyond it" if lv["p"] is not None and lv["p"] < 1 else "")
+                     + f"); beyond it (p below {alpha}) the model is called incomplete"
+                     + ("; it is" if lv["fails"] else ""))
+    if withheld and lines:
+        lines.append("the model fails a check: its effects are reported as partial, not named")
+    return lines
