@@ -1226,9 +1226,10 @@ def test_within_dispersion_leaves_out_one_cane_in_ten_not_an_effect_along_every_
     obstruction engaged from contact made 5-11 times stiffer (no elbow to find): its cane
     alone lifted the pooled spread to 16-23 times the caliper line's. Here 15 canes of 3
     pushes with trial noise 0.03 in ln k and a geometry error of 0.02: (A) one push 6 times
-    stiffer (ln 6 = 1.79) leaves the trimmed spread at the noise (within 40 %: 26 degrees of
-    freedom give the pooled sd a relative error of about 14 %, so 40 % is nearly 3 of those)
-    and the model passes, while over every cane it would fail; (B) two such canes are more
+    stiffer (ln 6 = 1.79) leaves the trimmed spread at the noise (within 40 %: 28 degrees of
+    freedom give the pooled sd a relative error of about 13 %, so 40 % is 3 of those) and its
+    ratio to the geometry's (0.03 / 0.02) under 2, while over every cane it would fail; (B)
+    two such canes are more
     than the trim takes, and fail; (C) a scatter of 0.3 on every cane (a neighbour's support
     on each) fails trimmed or not."""
     from canebench.discovery.adequacy import within_dispersion, within_trend_geometry
@@ -1251,7 +1252,7 @@ def test_within_dispersion_leaves_out_one_cane_in_ten_not_an_effect_along_every_
     one[3 * 7 + 1] += math.log(6.0)
     w, d, d_all = check(one)
     assert w["sd_trimmed_canes"] == ["7"], w  # the outlier's cane
-    assert abs(w["sd"] / noise - 1.0) < 0.4 and not d["fails"], (w, d)
+    assert abs(w["sd"] / noise - 1.0) < 0.4 and d["ratio"] < 2.0 and not d["fails"], (w, d)
     assert d_all["fails"] and w["sd_all"] > 0.25, d_all
     two = one.copy()
     two[3 * 11] += math.log(6.0)
@@ -1266,7 +1267,7 @@ def test_the_adequacy_lines_say_which_check_failed_and_which_canes_the_spread_le
     from canebench.discovery.checks_text import adequacy_lines
 
     doc = {"partial": [{"effect": "modulus_scale"}],
-           "adequacy": {"alpha": 0.002,
+           "adequacy": {"alpha": 0.002, "inadequate": True,
                         "within_after_cv": {"r": 0.1, "p": 0.3, "null_sd": 0.1, "n_canes": 15, "sd_all": 0.319,
                                             "sd_trimmed_canes": ["b5c3"]},
                         "within_dispersion": {"sd": 0.024, "geometry_sd": 0.019, "ratio": 1.27, "factor": 8.0,
@@ -1282,3 +1283,56 @@ def test_the_adequacy_lines_say_which_check_failed_and_which_canes_the_spread_le
     assert "-0.370" in level and level.endswith("it is")
     assert "partial, not named" in lines[-1]
     assert adequacy_lines({"adequacy": {}}) == []
+    # the verdict follows the checks, not the partial list; a failed p-value check says so
+    doc["adequacy"]["inadequate"], doc["partial"] = True, []
+    doc["adequacy"]["after_cv"] = {"r": -0.6, "p": 0.0001, "n_canes": 18, "null_median": 0.1}
+    lines = adequacy_lines(doc)
+    assert lines[0].endswith("it is") and "baseline" in lines[-1], lines
+    # older or sparser files: missing or None fields print as nan, never raise
+    sparse = {"adequacy": {"alpha": 0.002, "within_after_cv": {"r": math.nan, "p": 1.0, "null_sd": math.nan,
+                                                              "n_canes": 3},
+                           "within_dispersion": {"sd": math.nan, "geometry_sd": math.nan, "ratio": math.nan,
+                                                 "factor": 8.0, "material": 0.1, "fails": False},
+                           "shape": None}}
+    assert len(adequacy_lines(sparse)) == 2
+
+
+def test_the_trimmed_spreads_pool_the_kept_canes_exactly():
+    """Deterministic residuals: the trimmed sd and geometry_sd are the pooled within-cane figures
+    of the canes kept, with their own degrees of freedom; canes are ranked by their own variance
+    (a cane of 4 pushes is not trimmed for having more); a single push has no spread and does not
+    count toward the ten canes a trim needs."""
+    from canebench.discovery.adequacy import within_trend_geometry
+
+    dev3, dev4 = np.array([-1.0, 0.0, 1.0]), np.array([-1.5, -0.5, 0.5, 1.5])
+    amp = np.array([0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.09, 0.2])  # cane 9 scatters most
+    geo = np.linspace(0.01, 0.03, 10)  # each cane's own geometry error
+    pushes = [dev3] * 8 + [dev4, dev3]  # cane 8 has 4 pushes
+    canes = np.concatenate([np.full(len(d), c) for c, d in enumerate(pushes)])
+    resid = np.concatenate([a * d for a, d in zip(amp, pushes)]) + 0.5 * canes
+    gdev = np.concatenate([gc * d for gc, d in zip(geo, pushes)])
+    g = np.stack([(1 if b % 2 else -1) * gdev + 2.0 for b in range(10)])
+    position = np.concatenate([np.linspace(0.2, 0.6, len(d)) for d in pushes])
+    w = within_trend_geometry(canes, resid, position, g)
+    assert w["sd_trimmed_canes"] == ["9"], w
+    keep = canes != 9
+    ss_keep = sum(float(np.sum((a * d) ** 2)) for a, d in zip(amp[:9], pushes[:9]))
+    gs_keep = sum(float(np.sum((gc * d) ** 2)) for gc, d in zip(geo[:9], pushes[:9]))
+    dfk = int(keep.sum()) - 9
+    assert w["sd"] == pytest.approx(math.sqrt(ss_keep / dfk))
+    assert w["geometry_sd"] == pytest.approx(math.sqrt(gs_keep / dfk))
+    n = len(canes)
+    assert w["sd_all"] == pytest.approx(math.sqrt((ss_keep + 2 * 0.2**2) / (n - 10)))
+    # by variance, not sum: cane 8 (4 pushes, 5 x 0.09^2 = 0.0405) outweighs cane 9 in sum when
+    # cane 9 scatters 0.14 (2 x 0.14^2 = 0.0392), but not in variance (0.0135 against 0.0196)
+    resid2 = resid.copy()
+    resid2[canes == 9] = 0.14 * dev3 + 4.5
+    assert within_trend_geometry(canes, resid2, position, g)["sd_trimmed_canes"] == ["9"]
+    # nine canes: nothing trimmed
+    nine = canes < 9
+    w9 = within_trend_geometry(canes[nine], resid[nine], position[nine], g[:, nine])
+    assert w9["sd_trimmed_canes"] == [] and w9["sd"] == pytest.approx(w9["sd_all"])
+    # ten canes of which one is a single push: nine with spread, nothing trimmed
+    one = ~((canes == 0) & (position > 0.2))
+    w1 = within_trend_geometry(canes[one], resid[one], position[one], g[:, one])
+    assert w1["sd_trimmed_canes"] == [], w1

@@ -235,11 +235,18 @@ def _trimmed_spreads(uniq: np.ndarray, inv: np.ndarray, cnt: np.ndarray, rw: np.
     whose residual scatters most are left out of both pools (residual and geometry alike, so
     the ratio compares the same canes); an effect that acts along every cane (a neighbour's
     lateral support, 20.6 times on an independent generator's data) is untouched by it.
+    Below ten canes of two pushes or more nothing is left out, and one such push still fails
+    the model. The canes are picked by the residual alone, so under a correct model the
+    trimmed ratio runs lower than the whole one (about 9 % on 15 canes of 3 pushes, an
+    independent review's simulation); the allowance was measured on the trimmed ratio.
     """
     C = len(cnt)
     ss = np.bincount(inv, rw**2, minlength=C)
-    n_trim = int(C * TRIM_SHARE)
-    drop = np.argsort(ss)[::-1][:n_trim] if n_trim else np.array([], int)
+    # canes ranked by their own variance (a cane of more pushes is not worse for having more), a
+    # tenth of those that have one (a single push has no spread to trim)
+    spread = ss / np.maximum(cnt - 1.0, 1.0)
+    n_trim = int(np.sum(cnt > 1) * TRIM_SHARE)
+    drop = np.argsort(spread)[::-1][:n_trim] if n_trim else np.array([], int)
     keep = np.ones(C, bool)
     keep[drop] = False
     dfk = float(np.sum(cnt[keep]) - np.sum(keep))

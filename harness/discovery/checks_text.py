@@ -21,8 +21,11 @@ def adequacy_lines(doc: dict[str, Any]) -> list[str]:
     """
     ad = doc.get("adequacy") or {}
     alpha = ad.get("alpha")
-    withheld = bool(doc.get("partial"))
     lines: list[str] = []
+
+    def failed(p: Any) -> str:  # a p-value check's verdict
+        return "; it is" if p is not None and alpha is not None and p < alpha else ""
+
     a = ad.get("after_cv")
     if a:
         b = ad.get("before") or {}
@@ -32,7 +35,7 @@ def adequacy_lines(doc: dict[str, Any]) -> list[str]:
                      f"{a.get('null_median', NAN):.2f}"
                      + ("; their scatter exceeds what the residuals allow, so the null gives the line error all of "
                         "the between-cane spread (its most lenient form)" if a.get("geometry_bounded") else "")
-                     + f"; below p = {alpha} the model is called incomplete")
+                     + f"; below p = {alpha} the model is called incomplete" + failed(a.get("p")))
     wa = ad.get("within_after_cv")
     if wa:
         wb = ad.get("within_before") or {}
@@ -48,11 +51,14 @@ def adequacy_lines(doc: dict[str, Any]) -> list[str]:
                      f"null: trial noise and the caliper line's error): r = {wb.get('r', NAN):.2f} (p = "
                      f"{wb.get('p', NAN):.2g}) before, r = {wa['r']:.2f} (null spread +-{2 * wa['null_sd']:.2f}, "
                      f"p = {wa['p']:.2g}) after; below p = {alpha} the model is called incomplete{taken}")
+        if not tk and "within_tried" not in ad:
+            lines[-1] += failed(wa.get("p"))
     wd = ad.get("within_dispersion")
     if wd:
         trimmed = (wa or {}).get("sd_trimmed_canes") or []
         lines.append("within-cane spread of the held-out residual (pooled over canes"
-                     + (f", leaving out the {len(trimmed)} that scatter most ({', '.join(trimmed)}; all canes: "
+                     + (f", leaving out the {'cane' if len(trimmed) == 1 else f'{len(trimmed)} canes'} that "
+                        f"scatter most ({', '.join(trimmed)}; all canes: "
                         f"{wa.get('sd_all', NAN):.3f})" if trimmed else "")
                      + f"): {wd['sd']:.3f} in ln k, {wd['ratio']:.1f} times the caliper line's error alone "
                      f"({wd['geometry_sd']:.3f}); beyond {wd['factor']:.3g} times (and {wd['material']:.3g} in ln k) "
@@ -62,7 +68,7 @@ def adequacy_lines(doc: dict[str, Any]) -> list[str]:
         lines.append(f"shape (the traces' stiffening over the push): the fitted model changes it by "
                      f"{sh['predicted_mean']:+.3f} on average (spread {sh['predicted_spread']:.3f} across "
                      f"{sh['n_trials']} trials), the traces show {sh['beta']:.2f} of that change; p = {sh['p']:.2g} "
-                     f"against {sh['share']:.2g} of it (below {alpha} the model is called incomplete)")
+                     f"against {sh['share']:.2g} of it (below {alpha} the model is called incomplete{failed(sh['p'])})")
     elif sh.get("predicted_spread") is not None:
         lines.append(f"shape: the model changes the traces' stiffening by {sh['predicted_mean']:+.3f} on average and "
                      f"barely from trial to trial (spread {sh['predicted_spread']:.3f}): nothing to check")
@@ -73,6 +79,7 @@ def adequacy_lines(doc: dict[str, Any]) -> list[str]:
                      + (f"; p = {lv['p']:.2g} beyond it" if lv["p"] is not None and lv["p"] < 1 else "")
                      + f"); beyond it (p below {alpha}) the model is called incomplete"
                      + ("; it is" if lv["fails"] else ""))
-    if withheld and lines:
-        lines.append("the model fails a check: its effects are reported as partial, not named")
+    if ad.get("inadequate"):
+        lines.append("the model fails a check: " + ("its effects are reported as partial, not named"
+                                                   if doc.get("partial") else "the baseline does not account for the data"))
     return lines

@@ -645,8 +645,12 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                        f"{w['p']:.2g} < {ADEQUACY_ALPHA})")
         if dispersion_fails:
             d = adequacy["within_dispersion"]
+            cut = adequacy["within_after_cv"].get("sd_trimmed_canes") or []
             why.append(f"leaves a cane's own pushes scattered about it: within canes the held-out residual "
-                       f"spreads {d['sd']:.3f} in ln k, {d['ratio']:.1f} times what the calipers' error alone gives "
+                       f"spreads {d['sd']:.3f} in ln k"
+                       + (f" (leaving out {', '.join(cut)}, which scatter{'s' if len(cut) == 1 else ''} most)"
+                          if cut else "")
+                       + f", {d['ratio']:.1f} times what the calipers' error alone gives "
                        f"({d['geometry_sd']:.3f}; the allowance, {d['factor']:.3g} times, is for the taper's shape "
                        f"below the calipers, which they do not see)")
         if shape_fails:
