@@ -1297,6 +1297,30 @@ def test_the_adequacy_lines_say_which_check_failed_and_which_canes_the_spread_le
     assert len(adequacy_lines(sparse)) == 2
 
 
+def test_the_failure_reasons_explain_each_failed_check_and_only_those():
+    """The withheld note's clauses (checks_text.failure_reasons): one per check the workflow
+    listed as failed, in the workflow's order, with the figures that decided it."""
+    from canebench.discovery.checks_text import failure_reasons
+
+    ad = {"alpha": 0.002, "failed": ["dispersion", "shape_level"],
+          "after_cv": {"r": -0.6, "p": 0.0001, "null_median": 0.1},
+          "within_after_cv": {"r": 0.1, "p": 0.3, "null_sd": 0.1, "sd_trimmed_canes": ["b5c3", "b2c1"]},
+          "within_dispersion": {"sd": 0.231, "geometry_sd": 0.019, "ratio": 12.2, "factor": 8.0, "material": 0.1,
+                                "fails": True},
+          "shape": {"p": 0.5, "level": {"mean": -0.37, "p": 5e-5, "excess": 0.15, "n_canes": 18, "fails": True}}}
+    why = failure_reasons(ad)
+    assert len(why) == 2, why
+    assert why[0].startswith("leaves a cane's own pushes scattered") and "0.231" in why[0] and "12.2 times" in why[0]
+    assert "b5c3, b2c1, which scatter most" in why[0]
+    assert why[1].startswith("does not bend the traces") and "soften by 0.370" in why[1] and "18 canes" in why[1]
+    # the trend's after_cv is in the document but did not fail: no clause for it
+    assert not any("scale across canes" in w for w in why)
+    ad["failed"] = ["trend"]
+    (trend,) = failure_reasons(ad)
+    assert "falls with the model's stiffness level" in trend and "r = -0.60" in trend and "< 0.002" in trend
+    assert failure_reasons({"alpha": 0.002, "failed": []}) == []
+
+
 def test_the_trimmed_spreads_pool_the_kept_canes_exactly():
     """Deterministic residuals: the trimmed sd and geometry_sd are the pooled within-cane figures
     of the canes kept, with their own degrees of freedom; canes are ranked by their own variance

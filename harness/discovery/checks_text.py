@@ -2,8 +2,8 @@
 
 Both print the same checks from ``discovery.json`` (:meth:`.workflow.DiscoveryResult.to_json`),
 so they are worded once, here: the CLI indents the lines, the report escapes them into a
-list. The reasons a model is withheld, written into the result's own notes when a check
-fails, say more and live with the workflow that decides.
+list. The reasons a model is withheld (:func:`failure_reasons`), which the workflow writes
+into the result's own notes when a check fails, say more: what each failed check means.
 """
 
 from __future__ import annotations
@@ -83,3 +83,50 @@ def adequacy_lines(doc: dict[str, Any]) -> list[str]:
         lines.append("the model fails a check: " + ("its effects are reported as partial, not named"
                                                    if doc.get("partial") else "the baseline does not account for the data"))
     return lines
+
+
+def failure_reasons(adequacy: dict[str, Any]) -> list[str]:
+    """Why the model fails its adequacy checks: one clause per check in ``adequacy["failed"]``.
+
+    Each clause completes "the model ..." and says what the failed check means for the
+    physics (it does not scale across canes, it leaves a cane's pushes scattered...), with
+    the figures that decided it. Empty when every check passes.
+    """
+    failed = set(adequacy.get("failed") or ())
+    alpha = adequacy.get("alpha")
+    why: list[str] = []
+    if "trend" in failed:
+        a = adequacy["after_cv"]
+        why.append(f"does not scale across canes as the data do: the held-out residual "
+                   f"{'falls' if a['r'] < 0 else 'rises'} with the model's stiffness level between canes "
+                   f"(r = {a['r']:.2f}; the calipers' own error alone gives {a['null_median']:.2f}; "
+                   f"p = {a['p']:.2g} < {alpha})")
+    if "within" in failed:
+        w = adequacy["within_after_cv"]
+        why.append(f"does not share the stiffness along a cane as the data do: within canes the held-out "
+                   f"residual {'falls' if w['r'] < 0 else 'rises'} with push height (r = {w['r']:.2f}, the "
+                   f"calipers' error and trial noise alone give r within +-{2 * w['null_sd']:.2f}; p = "
+                   f"{w['p']:.2g} < {alpha})")
+    if "dispersion" in failed:
+        d = adequacy["within_dispersion"]
+        cut = adequacy["within_after_cv"].get("sd_trimmed_canes") or []
+        why.append(f"leaves a cane's own pushes scattered about it: within canes the held-out residual "
+                   f"spreads {d['sd']:.3f} in ln k"
+                   + (f" (leaving out {', '.join(cut)}, which scatter{'s' if len(cut) == 1 else ''} most)"
+                      if cut else "")
+                   + f", {d['ratio']:.1f} times what the calipers' error alone gives "
+                   f"({d['geometry_sd']:.3f}; the allowance, {d['factor']:.3g} times, is for the taper's shape "
+                   f"below the calipers, which they do not see)")
+    sh = adequacy.get("shape") or {}
+    if "shape" in failed:
+        why.append(f"bends the traces as they do not bend: it changes their stiffening over the push by "
+                   f"{sh['predicted_mean']:+.3f} on average (spread {sh['predicted_spread']:.3f} across trials) "
+                   f"and the traces show {sh['beta']:.2f} of that change (p = {sh['p']:.2g} < {alpha} "
+                   f"against {sh['share']:.2g} of it)")
+    if "shape_level" in failed:
+        lv = sh["level"]
+        why.append(f"does not bend the traces as they bend: over the push they "
+                   f"{'soften' if lv['mean'] < 0 else 'stiffen'} by {abs(lv['mean']):.3f} more than it does, on "
+                   f"average over {lv['n_canes']} canes (the allowance, {lv['excess']:.2g}, is for how a rig and an "
+                   f"engine place contact; p = {lv['p']:.2g} < {alpha} beyond it)")
+    return why

@@ -84,6 +84,7 @@ from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
 from ..model.presets import PRESETS
 from ..probe.protocol import PROTOCOLS
 from .adequacy import geometry_draws, level_trend_geometry, within_dispersion, within_trend_geometry
+from .checks_text import failure_reasons
 from .fit import Candidate, bootstrap_ci, cross_validate, direction_test_p, fit_candidate, sign_flip_p
 from .onsets import detect_early_contact, detect_onset
 from .screen import trial_geometry
@@ -616,7 +617,10 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         adequacy["within_taken_by"], adequacy["within_tried"] = taken, tried
         timing["within_taken_s"] = time.perf_counter() - t_w
         within_fails = taken is None
-    adequacy["inadequate"] = trend_fails or within_fails or shape_fails or dispersion_fails or shape_level_fails
+    adequacy["failed"] = [name for name, fails in (("trend", trend_fails), ("within", within_fails),
+                                                  ("dispersion", dispersion_fails), ("shape", shape_fails),
+                                                  ("shape_level", shape_level_fails)) if fails]
+    adequacy["inadequate"] = bool(adequacy["failed"])
     # the same trend against a plain cane permutation, blind to the shared geometry error and so
     # biased toward finding one: it names nothing and withholds nothing, it only warns
     # (``unexplained``) that the model may be incomplete
@@ -627,42 +631,10 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     fitted = tuple(final.fit.specs)
     partial: list[dict[str, Any]] = []
     if adequacy["inadequate"]:
-        a, sh = adequacy["after_cv"], adequacy["shape"]
         partial = [n for n in named if n["scope"] == "global"]
         named = [n for n in named if n["scope"] != "global"]
         what = ", ".join(n["effect"] for n in partial) or "the baseline"
-        why = []
-        if trend_fails:
-            why.append(f"does not scale across canes as the data do: the held-out residual "
-                       f"{'falls' if a['r'] < 0 else 'rises'} with the model's stiffness level between canes "
-                       f"(r = {a['r']:.2f}; the calipers' own error alone gives {a['null_median']:.2f}; "
-                       f"p = {a['p']:.2g} < {ADEQUACY_ALPHA})")
-        if within_fails:
-            w = adequacy["within_after_cv"]
-            why.append(f"does not share the stiffness along a cane as the data do: within canes the held-out "
-                       f"residual {'falls' if w['r'] < 0 else 'rises'} with push height (r = {w['r']:.2f}, the "
-                       f"calipers' error and trial noise alone give r within +-{2 * w['null_sd']:.2f}; p = "
-                       f"{w['p']:.2g} < {ADEQUACY_ALPHA})")
-        if dispersion_fails:
-            d = adequacy["within_dispersion"]
-            cut = adequacy["within_after_cv"].get("sd_trimmed_canes") or []
-            why.append(f"leaves a cane's own pushes scattered about it: within canes the held-out residual "
-                       f"spreads {d['sd']:.3f} in ln k"
-                       + (f" (leaving out {', '.join(cut)}, which scatter{'s' if len(cut) == 1 else ''} most)"
-                          if cut else "")
-                       + f", {d['ratio']:.1f} times what the calipers' error alone gives "
-                       f"({d['geometry_sd']:.3f}; the allowance, {d['factor']:.3g} times, is for the taper's shape "
-                       f"below the calipers, which they do not see)")
-        if shape_fails:
-            why.append(f"bends the traces as they do not bend: it changes their stiffening over the push by "
-                       f"{sh['predicted_mean']:+.3f} on average (spread {sh['predicted_spread']:.3f} across trials) "
-                       f"and the traces show {sh['beta']:.2f} of that change (p = {sh['p']:.2g} < {ADEQUACY_ALPHA} "
-                       f"against {sh['share']:.2g} of it)")
-        if shape_level_fails:
-            why.append(f"does not bend the traces as they bend: over the push they "
-                       f"{'soften' if lv['mean'] < 0 else 'stiffen'} by {abs(lv['mean']):.3f} more than it does, on "
-                       f"average over {lv['n_canes']} canes (the allowance, {lv['excess']:.2g}, is for how a rig and an "
-                       f"engine place contact; p = {lv['p']:.2g} < {ADEQUACY_ALPHA} beyond it)")
+        why = failure_reasons(adequacy)
         notes.append(f"the model ({what}) " + "; and it ".join(why) + ": an effect outside the library, or one the "
                      "library has with the wrong scaling or shape, remains"
                      + (f"; what the library fitted ({what}) took the part of it that it could and is not named: "
@@ -737,6 +709,7 @@ def _judge_pair(tp: dict[str, Any], pair: tuple[str, str], tried: list[dict[str,
     if ok and not tp["cv"].fit.bic < min(t["cv"].fit.bic for t in ok) - PAIR_OVER_SINGLE_BIC:
         tp["passed"] = False
         tp["row"]["refused"] = f"BIC not {PAIR_OVER_SINGLE_BIC:g} below the passing single's"
+    l1_pair = _l1_by_cane(tp["cv"].residual, ss.canes)
     for m in pair:
         o = next(n for n in pair if n != m)
         # (a member dropped as stale earlier is no single candidate now: fitted here)
@@ -745,7 +718,7 @@ def _judge_pair(tp: dict[str, Any], pair: tuple[str, str], tried: list[dict[str,
                 and _net_change(ss, lkb, tp["cv"].fit.specs, other.fit.specs) >= min_change)
         if ok and ok_m:
             l1_o = _l1_by_cane(other.residual, ss.canes)
-            gain_m = float((l1_o - _l1_by_cane(tp["cv"].residual, ss.canes)).mean())
+            gain_m = float((l1_o - l1_pair).mean())
             tp["row"].setdefault("gain_beside_other", {})[m] = gain_m
             ok_m = gain_m > MIN_REDUCTION * float(l1_o.mean())
         if not ok_m:
