@@ -674,6 +674,32 @@ def test_the_selftest_draws_each_effect_once_in_every_fifth_of_its_range():
             assert sorted(int(5 * (v - lo) / (hi - lo)) for v in x) == [0, 1, 2, 3, 4], (seed, eff, x)
 
 
+def test_the_selftest_says_where_the_out_of_library_support_touches(tmp_path):
+    """A support touching near the base lies below every push of every cane, one near the tip
+    above them all; the summary counts the out-of-library sets of the first kind and the names
+    given there (a stiffer lower cane is what a flare or a root makes)."""
+    import json
+
+    from canebench.canes.generate_hidden import generate_hidden
+    from canebench.discovery.selftest import _support_below_pushes, summarize
+
+    share = {}
+    for frac in (0.02, 0.98):
+        d = generate_hidden(tmp_path / f"s{frac}", 5, {"lateral_support": {"height_frac": frac, "k_support": 50.0}},
+                            n_bushes=1, canes_per_bush=2)
+        truth = json.loads((d / "truth" / "truth.json").read_text())
+        share[frac] = _support_below_pushes(truth)
+    assert share == {0.02: 1.0, 0.98: 0.0}
+    rows = pd.DataFrame([
+        {"kind": "out_of_library", "named": "base_flare", "unexplained": False, "support_below_pushes": 1.0},
+        {"kind": "out_of_library", "named": "none", "unexplained": True, "support_below_pushes": 0.5},
+        {"kind": "no_effect", "named": "none", "unexplained": False},
+    ]).assign(hidden="none", correct=True, partial="", size=0.0, gap_before=1.0, gap_after_cv=1.0)
+    s = summarize(rows)
+    assert (s["n_out_of_library_support_below_pushes"], s["out_of_library_misnamed_support_below_pushes"]) == (1, 1)
+    assert (s["out_of_library_misnamed"], s["out_of_library_flagged_unexplained"]) == (1, 1)
+
+
 def test_the_selftest_kinds_survive_a_csv_round_trip():
     """``selftest.csv`` is read back by users with pandas' defaults, which turn the strings
     ``null``, ``NA``, ``None``... into NaN: a kind spelled that way would vanish from

@@ -126,7 +126,6 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     The row is written to ``<case>/selftest_row.json`` as soon as it exists, so an
     interrupted suite resumes where it stopped.
     """
-    from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
     from canebench.execute.executors import make_executor
     from canebench.execute.jobs import code_fingerprint
@@ -189,6 +188,8 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     row["false_names"] = "+".join(sorted(set(named) - hidden)) or ""
     # effects named and then dropped as stale by selection's backward pass
     row["dropped"] = "+".join(r["removed"] for r in doc["selection"] if r.get("removed")) or ""
+    if "lateral_support" in effects:
+        row["support_below_pushes"] = _support_below_pushes(truth)
     if case["kind"] == "pair":
         row["draws"] = int(truth.get("draws", 1))
         row["effects"] = json.dumps(effects)
@@ -208,6 +209,20 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
         row["onset_err_mm"] = float(np.median(errs)) if errs else math.nan
     _write_json_atomic(done, {"case": case, "code": code, "row": row})
     return row
+
+
+def _support_below_pushes(truth: dict[str, Any]) -> float:
+    """Share of the canes whose lateral support touches below every push point.
+
+    Pushed only above it, a support is to the stiffness data a stiffer lower cane, the pattern
+    a flare or a stiffer root makes; where it lies among the pushes or above them, it is not.
+    Reported beside the out-of-library rows so a name there can be read against it, not to
+    excuse one.
+    """
+    frac = truth["effects"]["lateral_support"]["height_frac"]
+    below = [frac * c["geometry"]["length"] < min(t["s"] for t in c["trials"].values())
+             for c in truth["canes"].values() if c["trials"]]
+    return float(np.mean(below)) if below else math.nan
 
 
 def _read_json(path: Path) -> Any:
@@ -283,6 +298,12 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         # the withholding's cost: a hidden library effect fitted, then reported as partial only
         "names_withheld_where_hidden": int((df.kind.isin(["single", "pair"]) & (_col(df, "partial", "") != "")).sum()),
         "n_out_of_library": int((df.kind == "out_of_library").sum()),
+        # out-of-library sets whose support lies below every push of every cane (a stiffer lower
+        # cane to the data: what a flare or a root does), and how many of them were named
+        "n_out_of_library_support_below_pushes": int(((df.kind == "out_of_library")
+                                                      & (_col(df, "support_below_pushes", 0.0) == 1.0)).sum()),
+        "out_of_library_misnamed_support_below_pushes": int(((df.kind == "out_of_library") & (df.named != "none")
+                                                             & (_col(df, "support_below_pushes", 0.0) == 1.0)).sum()),
     }
     for p in ("scale", "k_root", "k_rig", "angle_deg"):
         c = f"err_{p}"
