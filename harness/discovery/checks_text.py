@@ -14,6 +14,11 @@ from typing import Any
 NAN = math.nan
 
 
+def _left_out(canes: list[str]) -> str:
+    """The canes the within-cane spread leaves out, as both texts name them."""
+    return f"{', '.join(canes)}, which scatter{'s' if len(canes) == 1 else ''} most"
+
+
 def adequacy_lines(doc: dict[str, Any]) -> list[str]:
     """One sentence per adequacy check in ``doc["adequacy"]``, in the order the workflow runs them.
 
@@ -57,9 +62,8 @@ def adequacy_lines(doc: dict[str, Any]) -> list[str]:
     if wd:
         trimmed = (wa or {}).get("sd_trimmed_canes") or []
         lines.append("within-cane spread of the held-out residual (pooled over canes"
-                     + (f", leaving out the {'cane' if len(trimmed) == 1 else f'{len(trimmed)} canes'} that "
-                        f"scatter most ({', '.join(trimmed)}; all canes: "
-                        f"{wa.get('sd_all', NAN):.3f})" if trimmed else "")
+                     + (f", leaving out {_left_out(trimmed)} (all canes: {wa.get('sd_all', NAN):.3f})"
+                        if trimmed else "")
                      + f"): {wd['sd']:.3f} in ln k, {wd['ratio']:.1f} times the caliper line's error alone "
                      f"({wd['geometry_sd']:.3f}); beyond {wd['factor']:.3g} times (and {wd['material']:.3g} in ln k) "
                      f"the model is called incomplete" + ("; it is" if wd["fails"] else ""))
@@ -112,8 +116,7 @@ def failure_reasons(adequacy: dict[str, Any]) -> list[str]:
         cut = adequacy["within_after_cv"].get("sd_trimmed_canes") or []
         why.append(f"leaves a cane's own pushes scattered about it: within canes the held-out residual "
                    f"spreads {d['sd']:.3f} in ln k"
-                   + (f" (leaving out {', '.join(cut)}, which scatter{'s' if len(cut) == 1 else ''} most)"
-                      if cut else "")
+                   + (f" (leaving out {_left_out(cut)})" if cut else "")
                    + f", {d['ratio']:.1f} times what the calipers' error alone gives "
                    f"({d['geometry_sd']:.3f}; the allowance, {d['factor']:.3g} times, is for the taper's shape "
                    f"below the calipers, which they do not see)")

@@ -277,6 +277,7 @@ def _col(df: pd.DataFrame, col: str, empty: Any) -> pd.Series:
 
 def summarize(df: pd.DataFrame) -> dict[str, Any]:
     big = df[(df.kind.isin(["single", "pair"])) & ((df["size"] > 2 * NOISE) | df.hidden.str.contains("obstruction"))]
+    below = (df.kind == "out_of_library") & (_col(df, "support_below_pushes", 0.0) == 1.0)
     s: dict[str, Any] = {
         "datasets": int(len(df)),
         "noise_ln": NOISE,
@@ -300,10 +301,8 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "n_out_of_library": int((df.kind == "out_of_library").sum()),
         # out-of-library sets whose support lies below every push of every cane (a stiffer lower
         # cane to the data: what a flare or a root does), and how many of them were named
-        "n_out_of_library_support_below_pushes": int(((df.kind == "out_of_library")
-                                                      & (_col(df, "support_below_pushes", 0.0) == 1.0)).sum()),
-        "out_of_library_misnamed_support_below_pushes": int(((df.kind == "out_of_library") & (df.named != "none")
-                                                             & (_col(df, "support_below_pushes", 0.0) == 1.0)).sum()),
+        "n_out_of_library_support_below_pushes": int(below.sum()),
+        "out_of_library_misnamed_support_below_pushes": int((below & (df.named != "none")).sum()),
     }
     for p in ("scale", "k_root", "k_rig", "angle_deg"):
         c = f"err_{p}"
