@@ -25,8 +25,10 @@ code's effect classes:
   (small-deflection compliance matrix of the rod, the force trace scaled by
   the stiffening it causes).
 
-The push is solved every 2 mm and the force interpolated (cubic) at the rig's
-0.5 mm steps; the rod's response is smooth at that scale.
+The push starts where the cane's weight holds it (the probe touches the sagged
+cane, so the contact force starts at zero), is solved every 2 mm and the force
+interpolated (cubic) at the rig's 0.5 mm steps; the rod's response is smooth at
+that scale.
 """
 
 from __future__ import annotations
@@ -184,12 +186,19 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                 n_dead = 0 if rng.random() < 0.25 else int(rng.integers(2, 15))
                 preload = rng.uniform(0, 15) if n_dead == 0 else 0.0
                 delta0 = rng.uniform(0, 0.5e-3)
+                # The probe meets the cane where its own weight holds it, not at the weightless rest
+                # shape the description draws, so the push starts from there and its force from zero.
+                # Swept from the rest, it started at the force holding the cane against its weight
+                # (-17 to +17 gf on seed 8005's canes, of either sign): a jump at contact, or a pull,
+                # that no rig records; on a soft root, whose pushes rise 20-60 gf, it doubled the
+                # within-cane scatter of the fitted slopes.
+                d_sag = float(np.dot(np.asarray(rod.solve_force(0.0)["r_probe"], float)[0] - rod.p0, u))
                 # the cane: solved every 2 mm up to the stop, interpolated at the rig's steps
                 xs, fs = [0.0], [0.0]
                 x = 0.0
                 while True:
                     x += 2e-3
-                    f = rod.solve_displacement(x)
+                    f = rod.solve_displacement(d_sag + x)
                     xs.append(x)
                     fs.append(f)
                     if f / GF_TO_N >= 1600.0 or x > 0.5e-3 * MAX_SAMPLES + 0.02:
