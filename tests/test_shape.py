@@ -211,13 +211,13 @@ def test_discover_withholds_a_pitch_the_traces_do_not_show(tmp_path):
     linear traces) screened against the probe's pitch alone: the pitch fits much of the
     stiffening, but the traces do not bend as a pitched probe's would, so nothing is named (the
     pitch is reported as partial) and the result is unexplained. The level trend does not fail
-    here (p = 0.01 when this dataset was picked); the within-cane checks do too (a pitch leaves
+    here (p = 0.01 when this dataset was picked); the within-cane checks fail too (a pitch leaves
     the support's height pattern along each cane). The fitted angle here is negative, so the
     change in shape it predicts is a softening (mean -0.26): the check tests the share of the
     change that the traces show, whatever its sign. The seed was picked among 9504-9516 after
     the generator's push started from the sagged cane (9504, the earlier seed, no longer lets
-    the pitch pass); of the five where the pitch is partial, it is the one where the level
-    trend alone would not withhold it."""
+    the pitch pass); of the seven where the pitch is partial, it is the one where the shape
+    check fails and the level trend does not."""
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
     from canebench.discovery.workflow import discover
