@@ -12,7 +12,8 @@
     Generates a 2-bush dataset with ``generate_hidden`` (a root spring K_ROOT N m/rad if given)
     into a temporary folder and prints, per push, the force (gf) that holds the probe point at
     the cane's weightless rest position, where the generator's push used to start: the jump at
-    contact it made.
+    contact it made; then the sag along the probe, where the push starts now, and the force
+    there (zero to the solver's tolerance).
 
 ``python docs/generator-sag/check.py bundled``
     The bundled synthetic dataset (``canes/synthetic``, from ``canes/generate.py``), which was not
@@ -72,6 +73,7 @@ def start(seed: int, k_root: float | None) -> None:
     from canebench.units import GF_TO_N
 
     forces: list[float] = []
+    starts: list[tuple[float, float]] = []
     original = rod.Rod.solve_force
 
     def recording(self, F, max_iter=30):  # the generator's first solve of each push: F = 0
@@ -79,6 +81,10 @@ def start(seed: int, k_root: float | None) -> None:
         if F == 0.0:
             saved = (self.m0, self.F, self._history, dict(self._jacobian))
             forces.append(self.solve_displacement(0.0) / GF_TO_N)  # held at the weightless rest
+            # where the push starts now: the free equilibrium's probe point, along u
+            d = float(np.dot(np.asarray(state["r_probe"], float)[0] - self.p0, self.u))
+            self._history, self._jacobian = [], {}
+            starts.append((1e3 * d, self.solve_displacement(d) / GF_TO_N))
             self.m0, self.F, self._history, self._jacobian = saved
         return state
 
@@ -90,6 +96,9 @@ def start(seed: int, k_root: float | None) -> None:
     print(f"seed {seed}{f', k_root {k_root}' if k_root else ''}: force at the weightless rest, per push (gf):")
     print("  " + " ".join(f"{v:+.1f}" for v in f))
     print(f"  range {f.min():+.1f} .. {f.max():+.1f}, median |F| {np.median(np.abs(f)):.1f}")
+    d, f0 = np.array(starts).T
+    print(f"  the sag along the probe, where the push starts now: {d.min():+.1f} .. {d.max():+.1f} mm; "
+          f"the force there: max |F| {np.max(np.abs(f0)):.1e} gf")
 
 
 def bundled() -> None:
