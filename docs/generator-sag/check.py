@@ -18,7 +18,8 @@
 ``python docs/generator-sag/check.py bundled``
     The bundled synthetic dataset (``canes/synthetic``, from ``canes/generate.py``), which was not
     regenerated: per push with a few samples before contact, the force at contact above the tare
-    (a line over the first 5 mm of contact, at contact).
+    (a line over the first 5 mm of contact, extrapolated back over the generator's sub-sample
+    contact ``delta0`` to the rest position the sweep started from).
 """
 
 from __future__ import annotations
@@ -54,7 +55,11 @@ def slopes(case: Path) -> None:
         ff = extract_field_stiffness(rig)
         x = rig.displacement_mm - rig.displacement_mm[0]
         nd = int(t["n_dead"])
-        oracle = fit_line(x[nd:], rig.force_gf[nd:] * GF_TO_N)
+        keep = np.arange(len(x)) >= nd
+        over = rig.force_gf >= 1000.0  # the rig's stop, dropped as the field stage drops it
+        if over.any():
+            keep &= np.arange(len(x)) < int(np.argmax(over))
+        oracle = fit_line(x[keep], rig.force_gf[keep] * GF_TO_N)
         rows.append({"cane": r.cane, "err": np.log(r.k_field / t["k_effect_n_per_mm"]),
                      "err_true_contact": np.log(oracle.slope / t["k_effect_n_per_mm"]),
                      "r_after_cv": r.r_after_cv, "ci_sd": np.log(ff.ci_high / ff.ci_low) / 3.92})
@@ -114,13 +119,18 @@ def bundled() -> None:
             nd = int(tr["n_dead"])
             f = read_rig_csv(root / "synthetic" / "trials" / f"syn_bush{bush}_cane{c}_trial{t}.csv").force_gf
             y = f[nd:nd + 10]
+            y = y[y < 1000.0]  # the rig's stop: the field stage drops these samples too
             if nd < 3 or len(y) < 4:  # a tare needs a few samples before contact
                 continue
-            # the line over the first 5 mm of contact, at contact, above the tare
-            offsets.append(np.polyfit(0.5 * np.arange(len(y)), y - f[:nd].mean(), 1)[1])
+            # the rig's first contact sample is delta0 past the cane's rest position (the generator's
+            # sub-sample contact): the line over the first 5 mm of contact, extrapolated back to the
+            # rest position, above the tare, is the force the sweep started from
+            x = 1e3 * tr["delta0_m"] + 0.5 * np.arange(len(y))
+            offsets.append(float(np.polyval(np.polyfit(x, y - f[:nd].mean(), 1), 0.0)))
     o = np.array(offsets)
-    print(f"bundled synthetic, {len(o)} pushes with 3+ samples before contact: force at contact above the tare "
-          f"median {np.median(o):+.1f} gf, range {o.min():+.1f} .. {o.max():+.1f}, |F| > 5 gf on {int((np.abs(o) > 5).sum())}")
+    print(f"bundled synthetic, {len(o)} pushes with 3+ samples before contact: force at the rest position above "
+          f"the tare median {np.median(o):+.1f} gf, range {o.min():+.1f} .. {o.max():+.1f}, "
+          f"|F| > 5 gf on {int((np.abs(o) > 5).sum())}")
 
 
 if __name__ == "__main__":
