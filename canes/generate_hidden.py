@@ -134,6 +134,19 @@ def _compliance3(points_fn, dfun, E, s_a: float, s_b: float, u: np.ndarray, n: i
     return out
 
 
+def sagged_start(rod) -> float:
+    """Where the push starts (m along the probe from the weightless rest): the cane under its weight.
+
+    The probe meets the cane where its own weight holds it, not at the weightless rest shape the
+    description draws, so the push starts from there and its force from zero. Swept from the
+    rest, it started at the force holding the cane against its weight (-17 to +17 gf on seed
+    8005's canes, of either sign): a jump at contact, or a pull, that no rig records; on a soft
+    root, whose pushes rise 20-60 gf, it raised the within-cane scatter of the fitted slopes from
+    0.03 to 0.11 in ln k (``docs/generator-sag/check.py``).
+    """
+    return float(np.dot(np.asarray(rod.solve_force(0.0)["r_probe"], float)[0] - rod.p0, rod.u))
+
+
 def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None, n_bushes: int = 6,
                     canes_per_bush: int = 3) -> Path:
     """Write one dataset with ``effects`` ({name: params}) hidden in it."""
@@ -186,13 +199,7 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                 n_dead = 0 if rng.random() < 0.25 else int(rng.integers(2, 15))
                 preload = rng.uniform(0, 15) if n_dead == 0 else 0.0
                 delta0 = rng.uniform(0, 0.5e-3)
-                # The probe meets the cane where its own weight holds it, not at the weightless rest
-                # shape the description draws, so the push starts from there and its force from zero.
-                # Swept from the rest, it started at the force holding the cane against its weight
-                # (-17 to +17 gf on seed 8005's canes, of either sign): a jump at contact, or a pull,
-                # that no rig records; on a soft root, whose pushes rise 20-60 gf, it raised the
-                # within-cane scatter of the fitted slopes from 0.03 to 0.11 in ln k.
-                d_sag = float(np.dot(np.asarray(rod.solve_force(0.0)["r_probe"], float)[0] - rod.p0, u))
+                d_sag = sagged_start(rod)
                 # the cane: solved every 2 mm up to the stop, interpolated at the rig's steps
                 xs, fs = [0.0], [0.0]
                 x = 0.0

@@ -79,21 +79,18 @@ def start(seed: int, k_root: float | None) -> None:
 
     forces: list[float] = []
     starts: list[tuple[float, float]] = []
-    original = rod.Rod.solve_force
+    original = gh.sagged_start
 
-    def recording(self, F, max_iter=30):  # the generator's first solve of each push: F = 0
-        state = original(self, F, max_iter)
-        if F == 0.0:
-            saved = (self.m0, self.F, self._history, dict(self._jacobian))
-            forces.append(self.solve_displacement(0.0) / GF_TO_N)  # held at the weightless rest
-            # where the push starts now: the free equilibrium's probe point, along u
-            d = float(np.dot(np.asarray(state["r_probe"], float)[0] - self.p0, self.u))
-            self._history, self._jacobian = [], {}
-            starts.append((1e3 * d, self.solve_displacement(d) / GF_TO_N))
-            self.m0, self.F, self._history, self._jacobian = saved
-        return state
+    def recording(r: rod.Rod) -> float:  # the generator's start of each push
+        d = original(r)
+        saved = (r.m0, r.F, r._history, dict(r._jacobian))
+        forces.append(r.solve_displacement(0.0) / GF_TO_N)  # held at the weightless rest
+        r._history, r._jacobian = [], {}
+        starts.append((1e3 * d, r.solve_displacement(d) / GF_TO_N))  # where the push starts now
+        r.m0, r.F, r._history, r._jacobian = saved
+        return d
 
-    rod.Rod.solve_force = recording
+    gh.sagged_start = recording
     effects = {"root_compliance": {"k_root": k_root}} if k_root else {}
     with tempfile.TemporaryDirectory() as tmp:
         gh.generate_hidden(Path(tmp) / "d", seed, effects, n_bushes=2)
