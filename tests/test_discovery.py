@@ -388,6 +388,78 @@ def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root
     assert len(res.to_df()) == 54
 
 
+def test_an_interval_reaching_no_effect_covers_the_null():
+    """``_covers_null``: a scale's interval across 1, a pitch's across 0, a flare's excess down to 0
+    and a spring's up to its stiffest search bound (standing for infinitely stiff) reach no effect;
+    intervals beside them, and a flare's length (whose null is only a default), do not."""
+    from canebench.discovery.workflow import _covers_null
+    from canebench.model.effects import EFFECTS, EffectSpec
+
+    def cov(text, **ci):
+        s = EffectSpec.parse(text)
+        return _covers_null(s, {(s.name, k): v for k, v in ci.items()})
+
+    assert cov("modulus_scale(scale=1.2)", scale=(0.95, 1.4)) == ["scale"]
+    assert cov("modulus_scale(scale=1.2)", scale=(1.05, 1.4)) == []
+    assert cov("modulus_scale(scale=0.8)", scale=(0.6, 0.97)) == []
+    # seed 7's set 25 (self-test): its pitch and interval
+    assert cov("probe_misalignment(angle_deg=-30.6)", angle_deg=(-36.1, 6.2)) == ["angle_deg"]
+    assert cov("probe_misalignment(angle_deg=-30.6)", angle_deg=(-36.1, -21.0)) == []
+    high = EFFECTS["root_compliance"].parameters["k_root"].high
+    assert cov("root_compliance(k_root=40)", k_root=(20.0, high)) == ["k_root"]
+    assert cov("root_compliance(k_root=40)", k_root=(20.0, 0.5 * high)) == []
+    assert cov("rig_compliance(k_rig=500)", k_rig=(300.0, EFFECTS["rig_compliance"].parameters["k_rig"].high)) == \
+        ["k_rig"]
+    assert cov("base_flare(excess_mm=3, length_mm=100)", excess_mm=(0.0, 5.0), length_mm=(20.0, 600.0)) == \
+        ["excess_mm"]
+    assert cov("base_flare(excess_mm=3, length_mm=100)", excess_mm=(1.0, 5.0), length_mm=(20.0, 600.0)) == []
+    # a parameter the bootstrap did not draw (held fixed) is not judged
+    assert cov("modulus_scale(scale=1.2)") == []
+
+
+def test_a_name_whose_interval_reaches_no_effect_is_withheld_and_the_rest_refitted(hidden_root, tmp_path,
+                                                                                  monkeypatch):
+    """The hidden root spring (15 N m/rad) passes the selection; its bootstrap interval is then
+    stretched to the search bound (3000 N m/rad, a root as stiff as no root). It is not named:
+    reported as ``unsupported``, the drop logged in the selection, the model refitted without it
+    and re-anchored on the engine, whose run is then the baseline's: the "after" is the "before"."""
+    import canebench.discovery.workflow as wf
+    from canebench.data.dataset import load_dataset
+    from canebench.execute.executors import make_executor
+    from canebench.model.modelfile import load_model_file
+
+    real = wf.bootstrap_ci
+    seen = []
+
+    def stretched(fit, *a, **k):
+        ci = real(fit, *a, **k)
+        seen.append(dict(ci))
+        key = ("root_compliance", "k_root")
+        if key in ci:
+            ci[key] = (ci[key][0], wf.EFFECTS["root_compliance"].parameters["k_root"].high)
+        return ci
+
+    monkeypatch.setattr(wf, "bootstrap_ci", stretched)
+    out = tmp_path / "d"
+    res = wf.discover(load_dataset(hidden_root), out=out, executor=make_executor("serial", 1, None), n_boot=10,
+                      confirm=False)
+    # the root passed the selection with an interval that did not reach no effect
+    lo, hi = seen[0][("root_compliance", "k_root")]
+    assert hi < 1000, seen[0]
+    assert len(seen) == 1  # nothing was left to draw intervals for
+    doc = json.loads((out / "discovery.json").read_text())
+    assert doc["named"] == [] and res.named == []
+    (u,) = doc["unsupported"]
+    assert u["effect"] == "root_compliance" and u["covers_null"] == ["k_root"]
+    assert u["params"]["k_root"] == pytest.approx(15.0, rel=0.2)
+    assert [r["removed"] for r in doc["selection"] if r.get("removed")] == ["root_compliance"]
+    assert "intervals covering no effect: root_compliance" in doc["stop_reason"]
+    assert any(n.startswith("root_compliance passed the selection") for n in doc["notes"])
+    assert load_model_file(out / "model.yaml").effects == ()
+    g = doc["gap"]
+    assert g["after_cv"]["median_abs_log_ratio"] == pytest.approx(g["before"]["median_abs_log_ratio"], rel=1e-6)
+
+
 def test_discover_names_nothing_on_a_null_dataset(tmp_path):
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset

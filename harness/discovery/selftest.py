@@ -186,7 +186,8 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     lv = (sh.get("level") or {}).get("mean")
     row["shape_level"] = lv if lv is not None else math.nan
     row["false_names"] = "+".join(sorted(set(named) - hidden)) or ""
-    # effects named and then dropped as stale by selection's backward pass
+    # effects named and then dropped: as stale by selection's backward pass, or their interval
+    # reaching no effect
     row["dropped"] = "+".join(r["removed"] for r in doc["selection"] if r.get("removed")) or ""
     if "lateral_support" in effects:
         row["support_below_pushes"] = _support_below_pushes(truth)

@@ -52,7 +52,9 @@ class Parameter:
     low, high : float
         Search bounds of the discovery workflow (physically plausible range).
     null : float
-        The value at which the effect does nothing (``inf`` for a spring in series).
+        The value at which the effect does nothing (``inf`` for a spring in
+        series); for a parameter that does not switch it off
+        (``switches_off=False``), the default value.
     log : bool
         Searched on a log scale (positive quantities spanning decades); only
         positive values are valid.
@@ -60,6 +62,11 @@ class Parameter:
     minimum : float
         Smallest physically valid value (beyond the search bounds: a model
         file may set any valid value).
+    switches_off : bool
+        Whether this parameter at ``null`` alone switches the effect off,
+        whatever the others are (a flare's excess does; its length, whose
+        ``null`` is only a default, does not). The discovery workflow does not
+        name an effect whose 95 % interval of such a parameter covers ``null``.
     """
 
     unit: str
@@ -69,6 +76,7 @@ class Parameter:
     log: bool = False
     doc: str = ""
     minimum: float = -math.inf
+    switches_off: bool = True
 
 
 class Effect:
@@ -179,7 +187,8 @@ class BaseFlare(Effect):
                "d(s) = d_fit(s) + excess_mm exp(-s / length_mm)")
     where = "geometry"
     parameters = {"excess_mm": Parameter("mm", 0.0, 25.0, 0.0, False, "extra diameter at the ground", minimum=0.0),
-                  "length_mm": Parameter("mm", 20.0, 600.0, 150.0, True, "e-folding length of the excess")}
+                  "length_mm": Parameter("mm", 20.0, 600.0, 150.0, True, "e-folding length of the excess",
+                                          switches_off=False)}
 
     def diameter(self, s: np.ndarray, d: np.ndarray) -> np.ndarray:
         return d + 1e-3 * self.p["excess_mm"] * np.exp(-np.asarray(s) / (1e-3 * self.p["length_mm"]))
