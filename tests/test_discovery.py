@@ -422,7 +422,8 @@ def test_a_name_whose_interval_reaches_no_effect_is_withheld_and_the_rest_refitt
     """The hidden root spring (15 N m/rad) passes the selection; its bootstrap interval is then
     stretched to the search bound (3000 N m/rad, a root as stiff as no root). It is not named:
     reported as ``unsupported``, the drop logged in the selection, the model refitted without it
-    and re-anchored on the engine, whose run is then the baseline's: the "after" is the "before"."""
+    and re-anchored on the engine, whose run is then the baseline's: the "after" is the "before";
+    the result is flagged unexplained."""
     import canebench.discovery.workflow as wf
     from canebench.data.dataset import load_dataset
     from canebench.execute.executors import make_executor
@@ -449,6 +450,8 @@ def test_a_name_whose_interval_reaches_no_effect_is_withheld_and_the_rest_refitt
     assert len(seen) == 1  # nothing was left to draw intervals for
     doc = json.loads((out / "discovery.json").read_text())
     assert doc["named"] == [] and res.named == []
+    # the residuals leaned the root's way significantly and nothing named takes that
+    assert doc["unexplained"] is True
     (u,) = doc["unsupported"]
     assert u["effect"] == "root_compliance" and u["covers_null"] == ["k_root"]
     assert u["params"]["k_root"] == pytest.approx(15.0, rel=0.2)

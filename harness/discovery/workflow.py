@@ -33,7 +33,8 @@
    effect whose 95 % cane-bootstrap interval reaches its no-effect value (a
    parameter with ``switches_off``: a scale of 1, a pitch of 0, a spring at its
    stiffest bound, no flare) is not named (``unsupported``), the rest refitted
-   and re-anchored without it; nothing takes its place.
+   and re-anchored without it; nothing takes its place, and the result is
+   ``unexplained`` (the residuals leaned its way significantly).
 5. Adequacy (:func:`.adequacy.level_trend_geometry`): the held-out residual
    must not trend with the model's own stiffness level between canes beyond
    what the caliper-fit geometry's own error makes it do. A model that fails
@@ -190,7 +191,8 @@ class DiscoveryResult:
                 row["excluded"] = True  # a soft contact before the field stage's knee: not scored
             tr.append(row)
         return {"baseline": self.baseline, "named": self.named, "unexplained": bool(self.unexplained),
-                "partial": self.partial, "unsupported": self.unsupported, "gap": self.gap, "trials": tr, "stop_reason": self.stop_reason,
+                "partial": self.partial, "unsupported": self.unsupported, "gap": self.gap, "trials": tr,
+                "stop_reason": self.stop_reason,
                 "notes": self.notes,
                 # NaN (a column a row does not have) as null: strict JSON
                 "selection": self.steps.astype(object).where(self.steps.notna(), None).to_dict("records"),
@@ -558,7 +560,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                      + ", ".join(f"{k} = {v:.4g}" for k, v in u["params"].items()) + ") but is not named: its 95 % "
                      + "; ".join(f"interval of {k}, [{lo:.4g}, {hi:.4g}], reaches its no-effect value"
                                  for k, (lo, hi) in u["ci95"].items() if k in u["covers_null"])
-                     + "; the rest refitted without it")
+                     + "; the rest refitted without it, and the result flagged unexplained: the residuals "
+                     "lean its way significantly, and nothing named takes that")
     if unsupported:
         stop += "; not named, their intervals covering no effect: " + ", ".join(u["effect"] for u in unsupported)
 
@@ -664,8 +667,11 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     # (``unexplained``) that the model may be incomplete
     adequacy["after_cv_permutation"] = level_trend(F, "r_after_cv", "log_k_model_cv", seed=seed)
     trend_warning = adequacy["after_cv_permutation"]["p"] < TREND_WARNING_ALPHA
-    # a trend along the canes that an unnamed effect takes still flags: structure remains
-    unexplained = structured or adequacy["inadequate"] or trend_warning or bool(adequacy.get("within_taken_by"))
+    # a trend along the canes that an unnamed effect takes still flags: structure remains; so does
+    # an effect that passed the selection (the residuals lean its way, significantly) but whose
+    # interval reaches no effect: what it took is not explained by anything named
+    unexplained = (structured or adequacy["inadequate"] or trend_warning or bool(adequacy.get("within_taken_by"))
+                   or bool(unsupported))
     fitted = tuple(final.fit.specs)
     partial: list[dict[str, Any]] = []
     if adequacy["inadequate"]:
