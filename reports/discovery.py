@@ -105,7 +105,7 @@ def section(folder: str | Path) -> str:
     if anc:
         last = anc[-1]
         notes += (f"<li>the screen was re-anchored on the {html.escape(str(last['engine']))} engine {len(anc)} time(s) "
-                  f"after the named effects; before each re-anchoring the engine differed from the screen by at most "
+                  f"during the selection; before each re-anchoring the engine differed from the screen by at most "
                   f"{max(a['engine_minus_screen_max_abs'] for a in anc):.3g} in ln k, at the last by "
                   f"{last['engine_minus_screen_max_abs']:.3g}</li>")
     bs = doc.get("between_cane_share", {})

@@ -400,6 +400,9 @@ def test_an_interval_reaching_no_effect_covers_the_null():
         return _covers_null(s, {(s.name, k): v for k, v in ci.items()})
 
     assert cov("modulus_scale(scale=1.2)", scale=(0.95, 1.4)) == ["scale"]
+    # the fit clamps log-scale parameters in log space: its stiffest root is exp(log(high)), a hair
+    # below high, and must still count as reaching it
+    assert cov("root_compliance(k_root=40)", k_root=(20.0, math.exp(math.log(3000.0)))) == ["k_root"]
     assert cov("modulus_scale(scale=1.2)", scale=(1.05, 1.4)) == []
     assert cov("modulus_scale(scale=0.8)", scale=(0.6, 0.97)) == []
     # seed 7's set 25 (self-test): its pitch and interval
@@ -415,6 +418,16 @@ def test_an_interval_reaching_no_effect_covers_the_null():
     assert cov("base_flare(excess_mm=3, length_mm=100)", excess_mm=(1.0, 5.0), length_mm=(20.0, 600.0)) == []
     # a parameter the bootstrap did not draw (held fixed) is not judged
     assert cov("modulus_scale(scale=1.2)") == []
+    # the side a null lies on, for a third party's parameters too: beyond either bound, at one, inside
+    from canebench.discovery.workflow import _null_side
+    from canebench.model.effects import Parameter
+
+    assert _null_side(Parameter("N/m", 20.0, 1e5, math.inf)) == 1e5
+    assert _null_side(Parameter("1", -10.0, 10.0, -math.inf)) == -10.0
+    assert _null_side(Parameter("m/N", 1e-6, 1e-2, 0.0, True)) == 1e-6
+    assert _null_side(Parameter("mm", 0.0, 25.0, 0.0)) == 0.0
+    assert math.isnan(_null_side(Parameter("deg", -45.0, 45.0, 0.0)))
+    assert math.isnan(_null_side(Parameter("1", 0.0, 1.0, math.nan)))
 
 
 def test_a_name_whose_interval_reaches_no_effect_is_withheld_and_the_rest_refitted(hidden_root, tmp_path,
@@ -883,6 +896,93 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
     assert current == names and steps == [] and calls == []
     nearest = _stalest(names, ("modulus_scale", "rig_compliance"), cv0, ss, lkf, lkb)
     assert nearest["net"] > 2 * MIN_CHANGE, nearest
+
+
+def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their_pair_partner():
+    """``_drop_unsupported`` on the bundled geometry (seed 7's scale 1.69 and root 131 N m/rad
+    hidden, as in the backward-pass test), intervals and engine re-anchoring replaced by stand-ins
+    that record their calls. A spurious pitch whose interval reaches 0 goes, the rest are refitted
+    and re-anchored, and the backward pass then drops the rig that had gone stale beside them. A
+    root whose interval reaches its stiffest bound takes the scale it entered beside as a pair
+    with it, and the model is the empty one's, as handed in. Where both reach their null in the
+    marginal intervals but either alone is tight, only the one whose removal changes the model
+    least goes."""
+    from types import SimpleNamespace
+
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.discovery.fit import Candidate, fit_candidate
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.workflow import MIN_CHANGE, _drop_unsupported, _stalest
+    from canebench.model.effects import EFFECTS, EffectSpec
+    from canebench.model.presets import PRESETS
+
+    cfg = PRESETS["beam-consistent"]
+    ss = ScreenSet.build([trial_geometry(t, cfg) for t in load_dataset(bundled_dataset())])
+    lkb = -np.log(ss.c0 * 1e3)
+    canes, inv = np.unique(ss.canes, return_inverse=True)
+    rng = np.random.default_rng(7)
+    scatter = rng.normal(0, 0.1, len(canes))[inv] + rng.normal(0, 0.02, len(lkb))
+    truth = (EffectSpec.parse("modulus_scale(scale=1.69)"), EffectSpec.parse("root_compliance(k_root=131)"))
+    lkf = predict_log_k(ss, lkb, truth) + scatter
+    empty = (ss.subset(np.ones(len(lkb), bool)), lkb.copy())  # stands for the pre-selection screen
+    calls, drawn = [], []
+    root_high = EFFECTS["root_compliance"].parameters["k_root"].high
+
+    def reanchor(ss_, lkb_, cv_):
+        calls.append(tuple(s.name for s in cv_.fit.specs))
+        return ss_, lkb_, cv_
+
+    def tight(fit):
+        # an interval of +-10 % about every fitted value: excludes every null here
+        return {(s.name, k): (0.9 * v, 1.1 * v) for s in fit.specs for k, v in s.params}
+
+    def draw_ci(fit, ss_, lkb_):
+        drawn.append(tuple(s.name for s in fit.specs))
+        return tight(fit)
+
+    def run(names, entered, override):
+        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), ss, lkf, lkb))
+        ci = {**tight(cv.fit), **override}
+        calls.clear(), drawn.clear()
+        steps = []
+        out = _drop_unsupported(names, entered, cv, ss, lkf, lkb, ci, draw_ci, reanchor, empty, MIN_CHANGE, steps)
+        return out, steps, cv
+
+    # a spurious pitch, then the stale rig (fitted at its stiffest bound beside the pitch, so given
+    # an interval below it here: it is the backward pass's to drop, not the interval's)
+    names = ("modulus_scale", "rig_compliance", "root_compliance", "probe_misalignment")
+    (current, cv, _, _, ci, unsupported, stale), steps, _ = run(
+        names, tuple((n,) for n in names), {("probe_misalignment", "angle_deg"): (-20.0, 5.0),
+                                            ("rig_compliance", "k_rig"): (5e4, 9e4)})
+    assert [u["effect"] for u in unsupported] == ["probe_misalignment"]
+    assert unsupported[0]["covers_null"] == ["angle_deg"] and unsupported[0]["ci95"]["angle_deg"] == [-20.0, 5.0]
+    assert stale == ["rig_compliance"] and current == ("modulus_scale", "root_compliance")
+    assert calls == [("modulus_scale", "rig_compliance", "root_compliance"), ("modulus_scale", "root_compliance")]
+    assert drawn == [current] and set(ci) == {("modulus_scale", "scale"), ("root_compliance", "k_root")}
+    assert [r["removed"] for r in steps] == ["probe_misalignment", "rig_compliance"]
+    got = {s.name: dict(s.params) for s in cv.fit.specs}
+    assert got["root_compliance"]["k_root"] == pytest.approx(131, rel=0.1), got
+
+    # a pair's member reaches its null: its partner goes too, and the model is the empty one's
+    (current, cv, ss_out, lkb_out, ci, unsupported, stale), steps, _ = run(
+        ("modulus_scale", "root_compliance"), (("modulus_scale", "root_compliance"),),
+        {("root_compliance", "k_root"): (60.0, root_high)})
+    assert current == () and ci == {} and stale == [] and calls == [] and drawn == []
+    assert ss_out is empty[0] and lkb_out is empty[1] and cv.fit.specs == ()
+    by = {u["effect"]: u for u in unsupported}
+    assert by["root_compliance"]["covers_null"] == ["k_root"]
+    assert by["modulus_scale"]["covers_null"] == [] and by["modulus_scale"]["dropped_with"] == "root_compliance"
+    assert steps[0]["removed"] == "modulus_scale+root_compliance"
+
+    # both reach their null in the marginal intervals: one goes, the other is tight alone and stays
+    (current, cv, _, _, ci, unsupported, stale), steps, cv0 = run(
+        ("modulus_scale", "root_compliance"), (("modulus_scale",), ("root_compliance",)),
+        {("root_compliance", "k_root"): (60.0, root_high), ("modulus_scale", "scale"): (0.95, 2.0)})
+    first = _stalest(("modulus_scale", "root_compliance"), ("modulus_scale", "root_compliance"), cv0, ss, lkf,
+                     lkb)["name"]
+    assert [u["effect"] for u in unsupported] == [first] and len(current) == 1 and first not in current
+    assert calls == [current] and drawn == [current]
 
 
 def test_caliper_scatter_is_pooled_over_canes_with_more_calipers_than_a_line_needs():

@@ -73,6 +73,9 @@ def main(a: argparse.Namespace) -> int:
                 for k, v in n["params"].items()))
     if doc.get("partial") and not any(n["scope"] == "global" for n in doc["named"]):
         print(f"  named: nothing; the library's best account (partial, above) {INADEQUATE}")
+    elif not doc["named"] and doc.get("unsupported"):
+        print("  named: nothing; " + ", ".join(u["effect"] for u in doc["unsupported"])
+              + " passed the selection, but not its interval (see the notes): unexplained")
     elif not doc["named"]:
         print("  named: nothing in the library explains the residual significantly")
     print(f"  stopped: {doc['stop_reason']}")

@@ -166,6 +166,8 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
                            "named": "+".join(named) or "none", "unexplained": doc["unexplained"],
                            # the library's best account when the adequacy check withheld its names
                            "partial": "+".join(n["effect"] for n in doc.get("partial", [])),
+                           # passed the selection, not named: an interval that reaches no effect
+                           "unsupported": "+".join(u["effect"] for u in doc.get("unsupported", [])),
                            "size": _effect_size(folder), "wall_s": time.perf_counter() - t0,
                            "gap_before": doc["gap"]["before"]["median_abs_log_ratio"],
                            "gap_after_cv": doc["gap"]["after_cv"]["median_abs_log_ratio"]}
@@ -299,6 +301,10 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "out_of_library_misnamed": int((df[df.kind == "out_of_library"].named != "none").sum()),
         # the withholding's cost: a hidden library effect fitted, then reported as partial only
         "names_withheld_where_hidden": int((df.kind.isin(["single", "pair"]) & (_col(df, "partial", "") != "")).sum()),
+        # and a hidden library effect that passed the selection but not its interval
+        "hidden_effect_unsupported": int(sum(bool(set(u.split("+")) & set(h.split("+")))
+                                             for u, h, k in zip(_col(df, "unsupported", ""), df.hidden, df.kind)
+                                             if k in ("single", "pair") and u)),
         "n_out_of_library": int((df.kind == "out_of_library").sum()),
         # out-of-library sets whose support lies below every push of every cane (a stiffer lower
         # cane to the data: what a flare or a root does), and how many of them were named

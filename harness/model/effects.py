@@ -66,7 +66,9 @@ class Parameter:
         Whether this parameter at ``null`` alone switches the effect off,
         whatever the others are (a flare's excess does; its length, whose
         ``null`` is only a default, does not). The discovery workflow does not
-        name an effect whose 95 % interval of such a parameter covers ``null``.
+        name an effect whose 95 % interval of such a parameter reaches ``null``
+        (or, for a null beyond the search bounds, the bound on its side: a
+        spring's stiffest bound stands for infinitely stiff).
     """
 
     unit: str
