@@ -469,7 +469,7 @@ def test_a_name_whose_interval_reaches_no_effect_is_withheld_and_the_rest_refitt
     assert u["effect"] == "root_compliance" and u["covers_null"] == ["k_root"]
     assert u["params"]["k_root"] == pytest.approx(15.0, rel=0.2)
     assert [r["removed"] for r in doc["selection"] if r.get("removed")] == ["root_compliance"]
-    assert "intervals covering no effect: root_compliance" in doc["stop_reason"]
+    assert "for an interval that reaches no effect: root_compliance" in doc["stop_reason"]
     assert any(n.startswith("root_compliance passed the selection") for n in doc["notes"])
     assert load_model_file(out / "model.yaml").effects == ()
     g = doc["gap"]
@@ -906,7 +906,8 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
     root whose interval reaches its stiffest bound takes the scale it entered beside as a pair
     with it, and the model is the empty one's, as handed in. Where both reach their null in the
     marginal intervals but either alone is tight, only the one whose removal changes the model
-    least goes."""
+    least goes. A partner is the one an effect last entered beside; and a backward pass that
+    empties the model leaves the empty one's screen."""
     from types import SimpleNamespace
 
     from canebench.data.dataset import bundled_dataset, load_dataset
@@ -983,6 +984,27 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
                      lkb)["name"]
     assert [u["effect"] for u in unsupported] == [first] and len(current) == 1 and first not in current
     assert calls == [current] and drawn == [current]
+
+    # the group an effect last entered in decides its partner: a rig dropped as stale that came back
+    # beside the root takes the root with it, not the scale it once stood beside
+    (current, cv, _, _, ci, unsupported, stale), steps, _ = run(
+        names[:3], (("modulus_scale",), ("rig_compliance", "root_compliance")),
+        {("rig_compliance", "k_rig"): (300.0, EFFECTS["rig_compliance"].parameters["k_rig"].high)})
+    assert current == ("modulus_scale",) and stale == []
+    assert {u["effect"]: u.get("dropped_with") for u in unsupported} == {"rig_compliance": None,
+                                                                          "root_compliance": "rig_compliance"}
+
+    # the backward pass after a drop can empty the model: then it is the empty one's, with no engine run
+    lkf_null = lkb + scatter
+    cv = SimpleNamespace(fit=fit_candidate(Candidate.of(("modulus_scale", "rig_compliance")), ss, lkf_null, lkb))
+    ci = {**tight(cv.fit), ("modulus_scale", "scale"): (0.9, 1.1), ("rig_compliance", "k_rig"): (5e3, 9e4)}
+    calls.clear(), drawn.clear()
+    current, cv, ss_out, lkb_out, ci, unsupported, stale = _drop_unsupported(
+        ("modulus_scale", "rig_compliance"), (("modulus_scale",), ("rig_compliance",)), cv, ss, lkf_null, lkb, ci,
+        draw_ci, reanchor, empty, MIN_CHANGE, [])
+    assert [u["effect"] for u in unsupported] == ["modulus_scale"] and stale == ["rig_compliance"]
+    assert current == () and ss_out is empty[0] and lkb_out is empty[1] and cv.fit.specs == ()
+    assert calls == [("rig_compliance",)] and drawn == [] and ci == {}
 
 
 def test_caliper_scatter_is_pooled_over_canes_with_more_calipers_than_a_line_needs():

@@ -38,8 +38,8 @@ def main(a: argparse.Namespace) -> int:
 
         out = Path(a.out if a.out != "canebench-runs/discover" else "canebench-runs/discover-selftest")
         df = run_selftest(out, a.seed, a.workers, only=a.selftest_cases)
-        cols = ["id", "named", "partial", "unexplained", "adequacy_p", "size", "gap_before", "gap_after_cv"] + \
-               [c for c in df.columns if c.startswith("err_")]
+        cols = [c for c in ["id", "named", "partial", "unsupported", "unexplained", "adequacy_p", "size", "gap_before",
+                            "gap_after_cv"] if c in df] + [c for c in df.columns if c.startswith("err_")]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
         print(json.dumps(summarize(df), indent=2, default=float))
         stem = "selftest_subset" if a.selftest_cases else "selftest"
@@ -71,11 +71,16 @@ def main(a: argparse.Namespace) -> int:
             print(f"  {what}: {n['effect']} " + ", ".join(
                 f"{k} = {v:.4g} {n['units'].get(k, '')} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}]"
                 for k, v in n["params"].items()))
+    for u in doc.get("unsupported", []):
+        print(f"  not named: {u['effect']} " + ", ".join(
+            f"{k} = {v:.4g} [{u['ci95'][k][0]:.4g}, {u['ci95'][k][1]:.4g}]" if k in u["ci95"] else f"{k} = {v:.4g}"
+            for k, v in u["params"].items())
+            + (f" (its interval reaches no effect: {', '.join(u['covers_null'])})" if u["covers_null"] else "")
+            + (f" (entered beside {u['dropped_with']} as a pair)" if "dropped_with" in u else ""))
     if doc.get("partial") and not any(n["scope"] == "global" for n in doc["named"]):
         print(f"  named: nothing; the library's best account (partial, above) {INADEQUATE}")
-    elif not doc["named"] and doc.get("unsupported"):
-        print("  named: nothing; " + ", ".join(u["effect"] for u in doc["unsupported"])
-              + " passed the selection, but not its interval (see the notes): unexplained")
+    elif doc.get("unsupported") and not any(n["scope"] == "global" for n in doc["named"]):
+        print("  named: no global effect; what passed the selection did not pass its interval (above): unexplained")
     elif not doc["named"]:
         print("  named: nothing in the library explains the residual significantly")
     print(f"  stopped: {doc['stop_reason']}")
@@ -91,7 +96,8 @@ def main(a: argparse.Namespace) -> int:
               f"(linear screen alone {v.get('linear_screen_vs_engine_max', float('nan')):.2g})")
     for line in adequacy_lines(doc):
         print(f"  {line}")
-    print(f"  unexplained (residual structure, or a model that does not fit the data's scaling or shape): "
+    print(f"  unexplained (residual structure, a model that does not fit the data's scaling or shape, or an effect "
+          f"that passed the selection but not its interval): "
           f"{doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")
     return 0

@@ -310,27 +310,39 @@ def _drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], 
     -------
     (current, cv_cur, ss, lkb, ci, unsupported, stale)
         ``unsupported``: one dict per dropped effect (``effect``, ``params``, ``ci95``,
-        ``covers_null``: the parameters whose interval reaches no effect, empty for a pair
+        ``covers_null``: the parameters whose interval reaches no effect, possibly none for a pair
         partner, whose ``dropped_with`` names the effect it entered beside); ``stale``: the
         effects the backward pass then dropped.
+
+    ``entered`` holds the groups the model's effects entered in (a pair together), without any
+    dropped since as stale: an effect can re-enter beside a new partner.
     """
     unsupported: list[dict[str, Any]] = []
     stale: list[str] = []
+    groups = _prune(entered, ())
+
+    def anchor(ss_, lkb_, cv_):
+        # the backward pass may empty the model too: then the empty model's screen, as handed in
+        if not cv_.fit.specs:
+            return empty[0], empty[1], cross_validate(Candidate.of(()), empty[0], lkf, empty[1])
+        return reanchor(ss_, lkb_, cv_)
+
     while current:
         idle = {s.name: cov for s in cv_cur.fit.specs if (cov := _covers_null(s, ci))}
         if not idle:
             break
         name = _stalest(current, tuple(idle), cv_cur, ss, lkf, lkb)["name"] if len(idle) > 1 else next(iter(idle))
-        group = next((g for g in entered if name in g), (name,))
+        group = next((g for g in reversed(groups) if name in g), (name,))
         gone = tuple(c for c in current if c in group)
         for sp in cv_cur.fit.specs:
             if sp.name in gone:
                 unsupported.append({"effect": sp.name, "params": dict(sp.params),
                                     "ci95": {p: list(ci[(sp.name, p)]) for p, _ in sp.params if (sp.name, p) in ci},
-                                    "covers_null": idle[sp.name] if sp.name == name else [],
+                                    "covers_null": idle.get(sp.name, []),
                                     **({} if sp.name == name else {"dropped_with": name})})
         size = len(current)
         current = tuple(c for c in current if c not in gone)
+        groups = _prune(groups, gone)
         if current:
             cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb)
         else:
@@ -343,12 +355,18 @@ def _drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], 
                              + (f"; {', '.join(c for c in gone if c != name)} entered beside it" if len(gone) > 1
                                 else "")})
         if current:
-            ss, lkb, cv_cur = reanchor(ss, lkb, cv_cur)
-            current, cv_cur, ss, lkb, dropped = _backward(current, (), cv_cur, ss, lkf, lkb, min_change, reanchor,
+            ss, lkb, cv_cur = anchor(ss, lkb, cv_cur)
+            current, cv_cur, ss, lkb, dropped = _backward(current, (), cv_cur, ss, lkf, lkb, min_change, anchor,
                                                           steps, len(current))
             stale.extend(dropped)
+            groups = _prune(groups, tuple(dropped))
         ci = draw_ci(cv_cur.fit, ss, lkb) if current else {}
     return current, cv_cur, ss, lkb, ci, unsupported, stale
+
+
+def _prune(groups: Any, names: tuple[str, ...]) -> list[tuple[str, ...]]:
+    """The groups the effects entered the model in, without ``names`` (and without emptied groups)."""
+    return [g2 for g in groups if (g2 := tuple(c for c in g if c not in names))]
 
 
 def _ok_log_k(res: pd.DataFrame, backend: str, order: pd.Series) -> np.ndarray:
@@ -589,6 +607,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             current, cv_cur, ss, lkb, dropped = _backward(current, best["add"], cv_cur, ss, lkf, lkb, min_change,
                                                           reanchor, steps, len(current))
             removed.extend(dropped)
+            entered = _prune(entered, tuple(dropped))
             continue
         red = best["gain"] / float(l1_cur.mean()) if l1_cur.mean() > 0 else 0.0
         stop = (f"no candidate passes (best by held-out gain: {'+'.join(best['add'])}, {best['gain']:.3g} in mean "
@@ -609,20 +628,22 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     current, cv_cur, ss, lkb, ci, unsupported, stale = _drop_unsupported(
         current, tuple(entered), cv_cur, ss, lkf, lkb, ci, draw_ci, reanchor, (ss_sel, lkb_sel), min_change, steps)
     for u in unsupported:
+        beside = f", beside {u['dropped_with']}, which it entered the model with as a pair" if "dropped_with" in u else ""
         if u["covers_null"]:
             notes.append(f"{u['effect']} passed the selection ("
-                         + ", ".join(f"{k} = {v:.4g}" for k, v in u["params"].items()) + ") but is not named: its "
+                         + ", ".join(f"{k} = {v:.4g}" for k, v in u["params"].items()) + f") but is not named{beside}: its "
                          + "; ".join(f"95 % interval of {k}, [{u['ci95'][k][0]:.4g}, {u['ci95'][k][1]:.4g}], reaches "
                                      f"its no-effect value" for k in u["covers_null"])
-                         + "; the rest refitted without it, and the result flagged unexplained: the residuals "
-                         "leaned its way significantly, and nothing named takes that")
+                         + ("; the rest refitted without it" if current else "; nothing else is in the model")
+                         + ", and the result flagged unexplained: the residuals leaned its way significantly, and "
+                           "nothing named takes that")
         else:
-            notes.append(f"{u['effect']} entered the model beside {u['dropped_with']}, as a pair, and is not named "
-                         f"without it")
+            notes.append(f"{u['effect']} is not named{beside}: it failed the selection alone, and the pair no "
+                         f"longer stands")
     if stale:
         notes.append(f"dropped as stale once an effect was not named: {', '.join(stale)}")
     if unsupported:
-        stop += "; not named, their intervals covering no effect: " + ", ".join(
+        stop += "; not named, for an interval that reaches no effect: " + ", ".join(
             u["effect"] + ("" if u["covers_null"] else f" (with {u['dropped_with']})") for u in unsupported)
 
     final = cv_cur
@@ -712,7 +733,10 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         # library effect takes it, it is that effect below the naming rules (a taper fuller or
         # leaner below the calipers than their line is a flare), not one outside the library
         t_w = time.perf_counter()
-        taken, tried = _within_taken_by(tuple(c for c in candidates if c not in current and c != "obstruction"),
+        # (not an effect just refused for its interval: it would be named back by the side door)
+        refused = {u["effect"] for u in unsupported}
+        taken, tried = _within_taken_by(tuple(c for c in candidates if c not in current and c != "obstruction"
+                                              and c not in refused),
                                         current, ss, lkf, lkb, canes_f, height, cfg0.diameter_factor,
                                         adequacy["within_after_cv"]["n_trials"], seed)
         adequacy["within_taken_by"], adequacy["within_tried"] = taken, tried
