@@ -65,8 +65,11 @@ def main(a: argparse.Namespace) -> int:
                 "partial (not named: the model does not fit how stiffness scales across or along canes, or the "
                 "traces' shape)")
         if n["effect"] == "obstruction":
-            print(f"  named: obstruction in {n['n_trials']} trial(s): "
-                  + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" for t, v in n["local"].items()))
+            early = n.get("n_excluded_early_contact", 0)
+            print(f"  named: obstruction in {n['n_trials']} trial(s)"
+                  + (f" and {early} early contact(s), left out of the fit" if early else "") + ": "
+                  + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" + (" (early contact)" if v.get("excluded") else "")
+                              for t, v in n["local"].items()))
         else:
             print(f"  {what}: {n['effect']} " + ", ".join(
                 f"{k} = {v:.4g} {n['units'].get(k, '')} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}]"
