@@ -206,7 +206,7 @@ def test_trace_shapes_reads_only_the_trials_asked_for():
     assert np.isfinite(sh.kappa_field[0]) and np.isnan(sh.kappa_field[1])
 
 
-def test_discover_withholds_a_pitch_the_traces_do_not_show(tmp_path):
+def test_discover_withholds_a_pitch_the_traces_do_not_show(tmp_path, monkeypatch):
     """A neighbouring cane's lateral spring support (outside the library; a linear spring, so
     linear traces) screened against the probe's pitch alone: the pitch fits much of the
     stiffening, but the traces do not bend as a pitched probe's would, so nothing is named (the
@@ -217,15 +217,22 @@ def test_discover_withholds_a_pitch_the_traces_do_not_show(tmp_path):
     change that the traces show, whatever its sign. The seed was picked among 9504-9516 after
     the generator's push started from the sagged cane (9504, the earlier seed, no longer lets
     the pitch pass); of the seven where the pitch is partial, it is the one where the shape
-    check fails and the level trend does not."""
+    check fails and the level trend does not.
+
+    The interval rule (an effect whose 95 % interval reaches no effect is not named) acts before
+    the shape check and would refuse this pitch first: its 10 cane resamples give [-45, 37.7]
+    degrees, both signs (on 77243a4; with the rule on the result is the same verdict, nothing
+    named and unexplained, with the pitch under ``unsupported``). It is switched off here, so the
+    shape check is what is tested."""
+    import canebench.discovery.workflow as wf
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
-    from canebench.discovery.workflow import discover
     from canebench.execute.executors import make_executor
 
+    monkeypatch.setattr(wf, "_covers_null", lambda spec, ci: [])
     d = generate_hidden(tmp_path / "support", 9512, {"lateral_support": {"k_support": 100.0, "height_frac": 0.4}})
-    res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
-                   candidates=("probe_misalignment",))
+    res = wf.discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+                      candidates=("probe_misalignment",))
     sh = res.adequacy["shape"]
     assert [n["effect"] for n in res.partial] == ["probe_misalignment"], (res.partial, res.named)
     assert not [n for n in res.named if n["scope"] == "global"]
