@@ -840,6 +840,24 @@ def test_a_rig_softer_than_the_cane_gives_a_smooth_trace(tmp_path):
     assert stiff >= 3
 
 
+def _seed7_pair_screen():
+    """The bundled geometry's screen, its own stiffness (N/mm) as the anchor, seeded cane and trial
+    scatter (0.1 and 0.02 in ln), and seed 7's self-test pair (scale 1.69, root 131 N m/rad)."""
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet
+    from canebench.model.effects import EffectSpec
+    from canebench.model.presets import PRESETS
+
+    ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in load_dataset(bundled_dataset())])
+    lkb = -np.log(ss.c0 * 1e3)
+    canes, inv = np.unique(ss.canes, return_inverse=True)
+    rng = np.random.default_rng(7)
+    scatter = rng.normal(0, 0.1, len(canes))[inv] + rng.normal(0, 0.02, len(lkb))
+    truth = (EffectSpec.parse("modulus_scale(scale=1.69)"), EffectSpec.parse("root_compliance(k_root=131)"))
+    return ss, lkb, scatter, truth
+
+
 def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones():
     """Selection's backward pass (``_backward``) on the bundled geometry, the engine re-anchoring
     replaced by a stand-in that records its calls. With a modulus scale and a stiff root hidden
@@ -849,21 +867,12 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
     nothing is dropped; nor is the stale rig when it is the effect just added."""
     from types import SimpleNamespace
 
-    from canebench.data.dataset import bundled_dataset, load_dataset
     from canebench.discovery.fit import Candidate, fit_candidate
-    from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.screenset import predict_log_k
     from canebench.discovery.workflow import MIN_CHANGE, _backward, _stalest
     from canebench.model.effects import EffectSpec
-    from canebench.model.presets import PRESETS
 
-    cfg = PRESETS["beam-consistent"]
-    ss = ScreenSet.build([trial_geometry(t, cfg) for t in load_dataset(bundled_dataset())])
-    lkb = -np.log(ss.c0 * 1e3)  # the screen's own stiffness (N/mm) as the anchor
-    canes, inv = np.unique(ss.canes, return_inverse=True)
-    rng = np.random.default_rng(7)
-    scatter = rng.normal(0, 0.1, len(canes))[inv] + rng.normal(0, 0.02, len(lkb))
-    truth = (EffectSpec.parse("modulus_scale(scale=1.69)"), EffectSpec.parse("root_compliance(k_root=131)"))
+    ss, lkb, scatter, truth = _seed7_pair_screen()
     names = ("modulus_scale", "rig_compliance", "root_compliance")
     calls = []
 
@@ -910,21 +919,12 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
     empties the model leaves the empty one's screen."""
     from types import SimpleNamespace
 
-    from canebench.data.dataset import bundled_dataset, load_dataset
     from canebench.discovery.fit import Candidate, fit_candidate
-    from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.screenset import predict_log_k
     from canebench.discovery.workflow import MIN_CHANGE, _drop_unsupported, _stalest
-    from canebench.model.effects import EFFECTS, EffectSpec
-    from canebench.model.presets import PRESETS
+    from canebench.model.effects import EFFECTS
 
-    cfg = PRESETS["beam-consistent"]
-    ss = ScreenSet.build([trial_geometry(t, cfg) for t in load_dataset(bundled_dataset())])
-    lkb = -np.log(ss.c0 * 1e3)
-    canes, inv = np.unique(ss.canes, return_inverse=True)
-    rng = np.random.default_rng(7)
-    scatter = rng.normal(0, 0.1, len(canes))[inv] + rng.normal(0, 0.02, len(lkb))
-    truth = (EffectSpec.parse("modulus_scale(scale=1.69)"), EffectSpec.parse("root_compliance(k_root=131)"))
+    ss, lkb, scatter, truth = _seed7_pair_screen()
     lkf = predict_log_k(ss, lkb, truth) + scatter
     empty = (ss.subset(np.ones(len(lkb), bool)), lkb.copy())  # stands for the pre-selection screen
     calls, drawn = [], []

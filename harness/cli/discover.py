@@ -71,15 +71,11 @@ def main(a: argparse.Namespace) -> int:
                   + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" + (" (early contact)" if v.get("excluded") else "")
                               for t, v in n["local"].items()))
         else:
-            print(f"  {what}: {n['effect']} " + ", ".join(
-                f"{k} = {v:.4g} {n['units'].get(k, '')} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}]"
-                for k, v in n["params"].items()))
+            print(f"  {what}: {n['effect']} {_params_text(n)}")
     for u in doc.get("unsupported", []):
-        print(f"  not named: {u['effect']} " + ", ".join(
-            f"{k} = {v:.4g} [{u['ci95'][k][0]:.4g}, {u['ci95'][k][1]:.4g}]" if k in u["ci95"] else f"{k} = {v:.4g}"
-            for k, v in u["params"].items())
-            + (f" (its interval reaches no effect: {', '.join(u['covers_null'])})" if u["covers_null"] else "")
-            + (f" (entered beside {u['dropped_with']} as a pair)" if "dropped_with" in u else ""))
+        print(f"  not named: {u['effect']} {_params_text(u)}"
+              + (f" (its interval reaches no effect: {', '.join(u['covers_null'])})" if u["covers_null"] else "")
+              + (f" (entered beside {u['dropped_with']} as a pair)" if "dropped_with" in u else ""))
     if doc.get("partial") and not any(n["scope"] == "global" for n in doc["named"]):
         print(f"  named: nothing; the library's best account (partial, above) {INADEQUATE}")
     elif doc.get("unsupported") and not any(n["scope"] == "global" for n in doc["named"]):
@@ -104,3 +100,10 @@ def main(a: argparse.Namespace) -> int:
           f"{doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")
     return 0
+
+
+def _params_text(n: dict) -> str:
+    """``k = v unit [lo, hi]`` for each parameter of a named (or not named) effect in discovery.json."""
+    units, ci = n.get("units", {}), n.get("ci95", {})
+    return ", ".join(f"{k} = {v:.4g}" + (f" {units[k]}" if units.get(k) else "")
+                     + (f" [{ci[k][0]:.4g}, {ci[k][1]:.4g}]" if k in ci else "") for k, v in n["params"].items())

@@ -319,35 +319,38 @@ def _drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], 
     """
     unsupported: list[dict[str, Any]] = []
     stale: list[str] = []
-    groups = _prune(entered, ())
+    groups = list(entered)
+
+    def at_empty():
+        return empty[0], empty[1], cross_validate(Candidate.of(()), empty[0], lkf, empty[1])
 
     def anchor(ss_, lkb_, cv_):
         # the backward pass may empty the model too: then the empty model's screen, as handed in
-        if not cv_.fit.specs:
-            return empty[0], empty[1], cross_validate(Candidate.of(()), empty[0], lkf, empty[1])
-        return reanchor(ss_, lkb_, cv_)
+        return at_empty() if not cv_.fit.specs else reanchor(ss_, lkb_, cv_)
 
     while current:
         idle = {s.name: cov for s in cv_cur.fit.specs if (cov := _covers_null(s, ci))}
         if not idle:
             break
-        name = _stalest(current, tuple(idle), cv_cur, ss, lkf, lkb)["name"] if len(idle) > 1 else next(iter(idle))
+        least = _stalest(current, tuple(idle), cv_cur, ss, lkf, lkb) if len(idle) > 1 else {}
+        name = least.get("name", next(iter(idle)))
         group = next((g for g in reversed(groups) if name in g), (name,))
         gone = tuple(c for c in current if c in group)
         for sp in cv_cur.fit.specs:
             if sp.name in gone:
                 unsupported.append({"effect": sp.name, "params": dict(sp.params),
-                                    "ci95": {p: list(ci[(sp.name, p)]) for p, _ in sp.params if (sp.name, p) in ci},
+                                    "ci95": _ci_of(sp, ci),
                                     "covers_null": idle.get(sp.name, []),
                                     **({} if sp.name == name else {"dropped_with": name})})
         size = len(current)
         current = tuple(c for c in current if c not in gone)
         groups = _prune(groups, gone)
         if current:
-            cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb)
+            # the stalest search already fitted the model without ``name`` alone
+            cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb,
+                                    full=least.get("fit") if gone == (name,) else None)
         else:
-            ss, lkb = empty
-            cv_cur = cross_validate(Candidate.of(()), ss, lkf, lkb)
+            ss, lkb, cv_cur = at_empty()
         steps.append({"step": size, "model": "+".join(current), "candidate": "".join(f"-{c}" for c in gone),
                       "bic": cv_cur.fit.bic, "params": {sp.name: dict(sp.params) for sp in cv_cur.fit.specs},
                       "chosen": True, "removed": "+".join(gone),
@@ -362,6 +365,11 @@ def _drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], 
             groups = _prune(groups, tuple(dropped))
         ci = draw_ci(cv_cur.fit, ss, lkb) if current else {}
     return current, cv_cur, ss, lkb, ci, unsupported, stale
+
+
+def _ci_of(spec: EffectSpec, ci: dict[tuple[str, str], tuple[float, float]]) -> dict[str, list[float]]:
+    """``spec``'s intervals in ``ci``, by parameter (those drawn)."""
+    return {p: list(ci[(spec.name, p)]) for p, _ in spec.params if (spec.name, p) in ci}
 
 
 def _prune(groups: Any, names: tuple[str, ...]) -> list[tuple[str, ...]]:
@@ -664,7 +672,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     named = []
     for spec in final.fit.specs:
         named.append({"effect": spec.name, "scope": "global", "params": dict(spec.params),
-                      "ci95": {p: list(ci[(spec.name, p)]) for p, _ in spec.params if (spec.name, p) in ci},
+                      "ci95": _ci_of(spec, ci),
                       "units": {p: EFFECTS[spec.name].parameters[p].unit for p, _ in spec.params}})
         fx1 = AppliedEffects([spec.instance()])
         if fx1.changes_diameter and len(ss.cal_s):
