@@ -69,7 +69,7 @@ def figures(out: str | Path) -> list[Path]:
 def section(folder: str | Path) -> str:
     """HTML section for a folder holding ``discovery.json`` (empty string if none)."""
     from canebench.discovery.checks_text import adequacy_lines
-    from canebench.discovery.workflow import INADEQUATE
+    from canebench.discovery.verdict import INADEQUATE
 
     folder = Path(folder)
     f = folder / "discovery.json"

@@ -5,7 +5,6 @@ from __future__ import annotations
 import html
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -389,15 +388,15 @@ def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root
 
 
 def test_an_interval_reaching_no_effect_covers_the_null():
-    """``_covers_null``: a scale's interval across 1, a pitch's across 0, a flare's excess down to 0
+    """``covers_null``: a scale's interval across 1, a pitch's across 0, a flare's excess down to 0
     and a spring's up to its stiffest search bound (standing for infinitely stiff) reach no effect;
     intervals beside them, and a flare's length (whose null is only a default), do not."""
-    from canebench.discovery.workflow import _covers_null
+    from canebench.discovery.nulls import covers_null
     from canebench.model.effects import EFFECTS, EffectSpec
 
     def cov(text, **ci):
         s = EffectSpec.parse(text)
-        return _covers_null(s, {(s.name, k): v for k, v in ci.items()})
+        return covers_null(s, {(s.name, k): v for k, v in ci.items()})
 
     assert cov("modulus_scale(scale=1.2)", scale=(0.95, 1.4)) == ["scale"]
     # the fit clamps log-scale parameters in log space: its stiffest root is exp(log(high)), a hair
@@ -419,15 +418,15 @@ def test_an_interval_reaching_no_effect_covers_the_null():
     # a parameter the bootstrap did not draw (held fixed) is not judged
     assert cov("modulus_scale(scale=1.2)") == []
     # the side a null lies on, for a third party's parameters too: beyond either bound, at one, inside
-    from canebench.discovery.workflow import _null_side
+    from canebench.discovery.nulls import null_bound
     from canebench.model.effects import Parameter
 
-    assert _null_side(Parameter("N/m", 20.0, 1e5, math.inf)) == 1e5
-    assert _null_side(Parameter("1", -10.0, 10.0, -math.inf)) == -10.0
-    assert _null_side(Parameter("m/N", 1e-6, 1e-2, 0.0, True)) == 1e-6
-    assert _null_side(Parameter("mm", 0.0, 25.0, 0.0)) == 0.0
-    assert math.isnan(_null_side(Parameter("deg", -45.0, 45.0, 0.0)))
-    assert math.isnan(_null_side(Parameter("1", 0.0, 1.0, math.nan)))
+    assert null_bound(Parameter("N/m", 20.0, 1e5, math.inf)) == 1e5
+    assert null_bound(Parameter("1", -10.0, 10.0, -math.inf)) == -10.0
+    assert null_bound(Parameter("m/N", 1e-6, 1e-2, 0.0, True)) == 1e-6
+    assert null_bound(Parameter("mm", 0.0, 25.0, 0.0)) == 0.0
+    assert math.isnan(null_bound(Parameter("deg", -45.0, 45.0, 0.0)))
+    assert math.isnan(null_bound(Parameter("1", 0.0, 1.0, math.nan)))
 
 
 def test_a_name_whose_interval_reaches_no_effect_is_withheld_and_the_rest_refitted(hidden_root, tmp_path,
@@ -620,7 +619,7 @@ def test_discover_withholds_names_for_a_lateral_support_outside_the_library(tmp_
     nothing is named: the fit is reported as partial and the result is unexplained. k_support
     200 N/m is the top of the self-test's range; the check sees strong supports only (seed 13's
     dataset at the same strength gives p = 0.014 with three effects fitted, flagged by the
-    permutation warning only: README, Discovery)."""
+    permutation warning only: docs/discovery.md)."""
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
     from canebench.discovery.workflow import discover
@@ -859,7 +858,7 @@ def _seed7_pair_screen():
 
 
 def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones():
-    """Selection's backward pass (``_backward``) on the bundled geometry, the engine re-anchoring
+    """Selection's backward pass (``backward``) on the bundled geometry, the engine re-anchoring
     replaced by a stand-in that records its calls. With a modulus scale and a stiff root hidden
     (seed 7's self-test pair: 1.69, 131 N m/rad) and a rig spring fitted beside them, the rig
     refits to a stiffness that changes nothing: it is dropped, the rest re-anchored once, the
@@ -869,7 +868,7 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
 
     from canebench.discovery.fit import Candidate, fit_candidate
     from canebench.discovery.screenset import predict_log_k
-    from canebench.discovery.workflow import MIN_CHANGE, _backward, _stalest
+    from canebench.discovery.selection import MIN_CHANGE, backward, stalest
     from canebench.model.effects import EffectSpec
 
     ss, lkb, scatter, truth = _seed7_pair_screen()
@@ -885,7 +884,7 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
         cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), ss, lkf, lkb))
         calls.clear()
         steps = []
-        out = _backward(names, protect, cv, ss, lkf, lkb, MIN_CHANGE, reanchor, steps, 3)
+        out = backward(names, protect, cv, ss, lkf, lkb, MIN_CHANGE, reanchor, steps, 3)
         return out, steps, lkf, cv
 
     (current, cv, _, _, dropped), steps, lkf, _ = run(truth, ("root_compliance",))
@@ -903,12 +902,12 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
     (current, *_), steps, lkf, cv0 = run(truth + (EffectSpec.parse("rig_compliance(k_rig=80)"),),
                                          ("root_compliance",))
     assert current == names and steps == [] and calls == []
-    nearest = _stalest(names, ("modulus_scale", "rig_compliance"), cv0, ss, lkf, lkb)
+    nearest = stalest(names, ("modulus_scale", "rig_compliance"), cv0, ss, lkf, lkb)
     assert nearest["net"] > 2 * MIN_CHANGE, nearest
 
 
 def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their_pair_partner():
-    """``_drop_unsupported`` on the bundled geometry (seed 7's scale 1.69 and root 131 N m/rad
+    """``drop_unsupported`` on the bundled geometry (seed 7's scale 1.69 and root 131 N m/rad
     hidden, as in the backward-pass test), intervals and engine re-anchoring replaced by stand-ins
     that record their calls. A spurious pitch whose interval reaches 0 goes, the rest are refitted
     and re-anchored, and the backward pass then drops the rig that had gone stale beside them. A
@@ -921,7 +920,7 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
 
     from canebench.discovery.fit import Candidate, fit_candidate
     from canebench.discovery.screenset import predict_log_k
-    from canebench.discovery.workflow import MIN_CHANGE, _drop_unsupported, _stalest
+    from canebench.discovery.selection import MIN_CHANGE, drop_unsupported, stalest
     from canebench.model.effects import EFFECTS
 
     ss, lkb, scatter, truth = _seed7_pair_screen()
@@ -947,7 +946,7 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
         ci = {**tight(cv.fit), **override}
         calls.clear(), drawn.clear()
         steps = []
-        out = _drop_unsupported(names, entered, cv, ss, lkf, lkb, ci, draw_ci, reanchor, empty, MIN_CHANGE, steps)
+        out = drop_unsupported(names, entered, cv, ss, lkf, lkb, ci, draw_ci, reanchor, empty, MIN_CHANGE, steps)
         return out, steps, cv
 
     # a spurious pitch, then the stale rig (fitted at its stiffest bound beside the pitch, so given
@@ -980,7 +979,7 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
     (current, cv, _, _, ci, unsupported, stale), steps, cv0 = run(
         ("modulus_scale", "root_compliance"), (("modulus_scale",), ("root_compliance",)),
         {("root_compliance", "k_root"): (60.0, root_high), ("modulus_scale", "scale"): (0.95, 2.0)})
-    first = _stalest(("modulus_scale", "root_compliance"), ("modulus_scale", "root_compliance"), cv0, ss, lkf,
+    first = stalest(("modulus_scale", "root_compliance"), ("modulus_scale", "root_compliance"), cv0, ss, lkf,
                      lkb)["name"]
     assert [u["effect"] for u in unsupported] == [first] and len(current) == 1 and first not in current
     assert calls == [current] and drawn == [current]
@@ -999,7 +998,7 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
     cv = SimpleNamespace(fit=fit_candidate(Candidate.of(("modulus_scale", "rig_compliance")), ss, lkf_null, lkb))
     ci = {**tight(cv.fit), ("modulus_scale", "scale"): (0.9, 1.1), ("rig_compliance", "k_rig"): (5e3, 9e4)}
     calls.clear(), drawn.clear()
-    current, cv, ss_out, lkb_out, ci, unsupported, stale = _drop_unsupported(
+    current, cv, ss_out, lkb_out, ci, unsupported, stale = drop_unsupported(
         ("modulus_scale", "rig_compliance"), (("modulus_scale",), ("rig_compliance",)), cv, ss, lkf_null, lkb, ci,
         draw_ci, reanchor, empty, MIN_CHANGE, [])
     assert [u["effect"] for u in unsupported] == ["modulus_scale"] and stale == ["rig_compliance"]
@@ -1209,7 +1208,8 @@ def test_the_selection_score_test_holds_its_level_where_the_residual_carries_the
     from canebench.discovery.fit import Candidate, direction_test_p, fit_candidate
     from canebench.discovery.screen import trial_geometry
     from canebench.discovery.screenset import ScreenSet
-    from canebench.discovery.workflow import ALPHA, SCREENED
+    from canebench.discovery.selection import ALPHA
+    from canebench.discovery.workflow import SCREENED
     from canebench.model.presets import PRESETS
 
     ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in bundled_trials])
@@ -1241,12 +1241,13 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     down), which the linear screen's 1/cos^2 does not see. On 12 bundled trials the beam at an
     extra pitch of +-30 deg differs from the screen alone by up to 0.07 in ln k (measured 0.074,
     0.067; 0.02 at 10 deg). With the engine tabulated at +-20 and +-40 deg
-    (:func:`_pitch_table`) the screen must reproduce the engine at pitches off that grid within
+    (:func:`.engine_runs.pitch_table`) the screen must reproduce the engine at pitches off that grid within
     0.01 (a fifth of the 0.05 materiality step; measured 0.0018 at most)."""
     from canebench.data.dataset import bundled_dataset, load_dataset
     from canebench.discovery.screen import trial_geometry
     from canebench.discovery.screenset import ScreenSet, predict_log_k
-    from canebench.discovery.workflow import BASELINES, _ok_log_k, _pitch_table
+    from canebench.discovery.engine_runs import BaselineEngine, ok_log_k, pitch_table
+    from canebench.discovery.workflow import BASELINES
     from canebench.execute.executors import SerialExecutor
     from canebench.execute.runner import run_trials
     from canebench.model.effects import EffectSpec
@@ -1258,14 +1259,14 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     backend, preset, _ = BASELINES["beam"]
     cfg0, proto = PRESETS[preset], PROTOCOLS["fast"]
     F = pd.DataFrame({"trial": [t.id for t in trials]})
-    lkb = _ok_log_k(run_trials(trials, [backend], proto, cfg0, None, executor=ex).to_df(), backend, F.trial)
+    lkb = ok_log_k(run_trials(trials, [backend], proto, cfg0, None, executor=ex).to_df(), backend, F.trial)
     ss = ScreenSet.build([trial_geometry(t, cfg0) for t in trials])
-    ss_t, summary = _pitch_table(trials, F, ss, lkb, backend, proto, cfg0, (), None, ex, None)
+    ss_t, summary = pitch_table(BaselineEngine(trials, F, backend, proto, cfg0, (), None, ex, None), ss, lkb)
     assert summary["n_failed"] == 0
     for angle in (30.0, -30.0, 10.0):
         spec = EffectSpec("probe_misalignment", (("angle_deg", angle),))
         res = run_trials(trials, [backend], proto, cfg0.replace(effects=(spec,)), None, executor=ex).to_df()
-        eng = _ok_log_k(res, backend, F.trial)
+        eng = ok_log_k(res, backend, F.trial)
         assert np.all(np.isfinite(eng))
         without = np.max(np.abs(eng - predict_log_k(ss, lkb, (spec,))))
         with_table = np.max(np.abs(eng - predict_log_k(ss_t, lkb, (spec,))))
@@ -1275,9 +1276,9 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     # anchored at a pitch, the prediction at another pitch uses the table's difference
     a = EffectSpec("probe_misalignment", (("angle_deg", 20.0),))
     res = run_trials(trials, [backend], proto, cfg0.replace(effects=(a,)), None, executor=ex).to_df()
-    ss_a, lka = ss_t.anchored((a,)), _ok_log_k(res, backend, F.trial)
+    ss_a, lka = ss_t.anchored((a,)), ok_log_k(res, backend, F.trial)
     b = EffectSpec("probe_misalignment", (("angle_deg", -30.0),))
-    eng_b = _ok_log_k(run_trials(trials, [backend], proto, cfg0.replace(effects=(b,)), None,
+    eng_b = ok_log_k(run_trials(trials, [backend], proto, cfg0.replace(effects=(b,)), None,
                                  executor=ex).to_df(), backend, F.trial)
     assert np.max(np.abs(eng_b - predict_log_k(ss_a, lka, (b,)))) < 0.01
     # cross-validation folds and bootstrap resamples carry each trial's own row of the table
@@ -1343,10 +1344,11 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     independent generator's 2 % canker between the lower pushes gave 0, 0.42, 1.15): the check
     fails and nothing takes it. A fifth or a tenth of that step is taken by a flare (25 mm over
     80 mm; 7 mm over 110 mm, measured in review): three pushes a cane do not tell a moderate
-    weak zone from a fuller base, as the README states."""
+    weak zone from a fuller base, as docs/discovery.md states."""
     from canebench.discovery.fit import Candidate, cross_validate
     from canebench.discovery.screenset import predict_log_k
-    from canebench.discovery.workflow import ADEQUACY_ALPHA, SCREENED, _within_taken_by, within_after
+    from canebench.discovery.verdict import ADEQUACY_ALPHA, within_after, within_taken_by
+    from canebench.discovery.workflow import SCREENED
 
     cfg, ss, lkb, canes, height, inv, rng, noise, scale = _scaled_bundled_screen(bundled_trials)
     named = ("modulus_scale",)
@@ -1360,7 +1362,7 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     taper = predict_log_k(ss.with_diameters(d0), lkb, scale) + noise
     w = check(taper)
     assert w["p"] < ADEQUACY_ALPHA, w  # the premise: the scale alone leaves the trend
-    taken, tried = _within_taken_by(others, named, ss, taper, lkb, canes, height, 1.0, w["n_trials"], 0)
+    taken, tried = within_taken_by(others, named, ss, taper, lkb, canes, height, 1.0, w["n_trials"], 0)
     assert taken is not None and taken["effect"] == "base_flare", tried
     assert taken["p"] >= ADEQUACY_ALPHA and taken["at_bound"] == ["excess_mm"] and len(tried) == len(others)
     # a spring at its stiffest adds nothing and cannot take anything
@@ -1372,7 +1374,7 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     canker = predict_log_k(ss, lkb, scale) + noise - np.array([0.0, 0.4, 1.1])[rank]
     w = check(canker)
     assert w["p"] < ADEQUACY_ALPHA, w
-    taken, tried = _within_taken_by(others, named, ss, canker, lkb, canes, height, 1.0, w["n_trials"], 0)
+    taken, tried = within_taken_by(others, named, ss, canker, lkb, canes, height, 1.0, w["n_trials"], 0)
     assert taken is None, tried
 
 
@@ -1392,7 +1394,7 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
     from canebench.discovery.adequacy import within_dispersion
     from canebench.discovery.fit import Candidate, cross_validate
     from canebench.discovery.screenset import predict_log_k
-    from canebench.discovery.workflow import WITHIN_EXCESS, WITHIN_FLOOR, within_after
+    from canebench.discovery.verdict import WITHIN_EXCESS, WITHIN_FLOOR, within_after
 
     cfg, ss, lkb, canes, height, inv, rng, noise, scale = _scaled_bundled_screen(bundled_trials)
 
@@ -1458,7 +1460,7 @@ def test_within_dispersion_leaves_out_one_cane_in_ten_not_an_effect_along_every_
     than the trim takes, and fail; (C) a scatter of 0.3 on every cane (a neighbour's support
     on each) fails trimmed or not."""
     from canebench.discovery.adequacy import within_dispersion, within_trend_geometry
-    from canebench.discovery.workflow import WITHIN_EXCESS, WITHIN_FLOOR
+    from canebench.discovery.verdict import WITHIN_EXCESS, WITHIN_FLOOR
 
     rng = np.random.default_rng(3)
     C, per, noise, geo = 15, 3, 0.03, 0.02

@@ -224,12 +224,13 @@ def test_discover_withholds_a_pitch_the_traces_do_not_show(tmp_path, monkeypatch
     degrees, both signs (on 77243a4; with the rule on the result is the same verdict, nothing
     named and unexplained, with the pitch under ``unsupported``). It is switched off here, so the
     shape check is what is tested."""
+    import canebench.discovery.selection as selection
     import canebench.discovery.workflow as wf
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
     from canebench.execute.executors import make_executor
 
-    monkeypatch.setattr(wf, "_covers_null", lambda spec, ci: [])
+    monkeypatch.setattr(selection, "covers_null", lambda spec, ci: [])
     d = generate_hidden(tmp_path / "support", 9512, {"lateral_support": {"k_support": 100.0, "height_frac": 0.4}})
     res = wf.discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
                       candidates=("probe_misalignment",))

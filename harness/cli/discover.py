@@ -46,7 +46,8 @@ def main(a: argparse.Namespace) -> int:
         print(f"written: {out / (stem + '.csv')}, {out / (stem + '.json')}")
         return 0
     from ..discovery.checks_text import adequacy_lines
-    from ..discovery.workflow import INADEQUATE, discover
+    from ..discovery.verdict import INADEQUATE
+    from ..discovery.workflow import discover
     from ..execute.progress import Progress
 
     _, trials = common.trials(a)

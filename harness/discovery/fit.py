@@ -292,7 +292,7 @@ def direction_test_p(name: str | tuple[str, ...] | list[tuple[str, ...]], ss: Sc
     orthogonal to Q, so without it the flipped sums carry Q's part and the test is
     conservative after a first effect. It is off by default: on the self-test suite
     (seed 7) it added a spurious second effect to one single-effect set and a third
-    effect to both out-of-library sets, with no gain elsewhere (README, "Discovery");
+    effect to both out-of-library sets, with no gain elsewhere (docs/discovery.md);
     a false name costs more than a late one.
     """
     # one effect, effects tested jointly (a tuple), or a union of such sets (a list: the max

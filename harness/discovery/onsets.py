@@ -32,7 +32,7 @@ import numpy as np
 #: a second body must add at least half the cane's slope. It was 1.8 until an independently
 #: generated set engaged its obstructions at 1.45-3.0 times the slope: 1.8 found 8 of its 15
 #: elbows, 1.5 finds 11, with no onset named in 22 other datasets (nulls, pitched probes whose
-#: traces curve, supports) or added on the real trials (README, Discovery). The kink-not-curvature
+#: traces curve, supports) or added on the real trials (docs/discovery.md). The kink-not-curvature
 #: test (``MIN_SSE_RATIO``) is what tells an elbow from a cane's own stiffening.
 MIN_RATIO = 1.5
 MIN_SSE_RATIO = 2.5
@@ -87,7 +87,7 @@ def detect_onset(x_mm: np.ndarray, f_n: np.ndarray) -> Onset | None:
 #: b6c2t1's 3.3 then 5.9 gf/mm, stays below it)
 EARLY_MIN_RATIO = 1.8
 #: shortest ramp (mm) an early contact can have: rounded contact starts make ramps of 3-3.5 mm, the
-#: self-test generator's soft canes before a second body 5.5-26 mm (README, Discovery)
+#: self-test generator's soft canes before a second body 5.5-26 mm (docs/discovery.md)
 MIN_EARLY_RAMP_MM = 5.0
 #: t statistic the pre-contact ramp's slope must reach (a flat tare stretch has |t| of a few at most)
 MIN_RAMP_T = 6.0

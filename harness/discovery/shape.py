@@ -63,7 +63,7 @@ MIN_SHAPE_SPREAD = 0.01
 #: canes (:func:`shape_level`): an independent generator's nulls and library sets stay within
 #: 0.035 and the real trials at -0.008, but our own generator's soft roots and rigs, named
 #: right, reach -0.113 (cane means scattering 0.16); that generator's creep softens them by
-#: 0.21, its probe sliding along the cane by 0.37 one way and 0.19 the other (README, Discovery)
+#: 0.21, its probe sliding along the cane by 0.37 one way and 0.19 the other (docs/discovery.md)
 SHAPE_EXCESS = 0.15
 N_FLIPS = 20000
 

@@ -24,7 +24,7 @@ leaves a trend. Not every such trend: a modulus scale above 1 with a root or
 rig spring also stiffens soft canes relatively more, so the pair step can
 absorb part of it; the check is then weaker, not wrong. The model's level
 and the residual share the error of the caliper-fit geometry, which biases r
-negative (see ``ADEQUACY_ALPHA`` in :mod:`.workflow` for its measured size).
+negative (see ``ADEQUACY_ALPHA`` in :mod:`.verdict` for its measured size).
 """
 
 from __future__ import annotations

@@ -2,14 +2,14 @@
 
 Run from the repository: ``python tests/scripts/intervals_at_no_effect.py DIR [DIR ...]``. Every
 ``discovery.json`` under each folder is read (a self-test's ``--out``, a ``canebench discover
---out``); the judgement is the workflow's own (``_covers_null``). Results written before commit
+--out``); the judgement is the workflow's own (``nulls.covers_null``). Results written before commit
 0923947 still name such effects; later ones list them under ``unsupported``, printed too.
 """
 import json
 import sys
 from pathlib import Path
 
-from canebench.discovery.workflow import _covers_null
+from canebench.discovery.nulls import covers_null
 from canebench.model.effects import EffectSpec
 
 n_files = n_named = 0
@@ -23,7 +23,7 @@ for root in sys.argv[1:]:
             n_named += 1
             spec = EffectSpec(n["effect"], tuple(n["params"].items()))
             ci = {(n["effect"], k): tuple(v) for k, v in n["ci95"].items()}
-            cov = _covers_null(spec, ci)
+            cov = covers_null(spec, ci)
             if cov:
                 print(f"named, reaches no effect: {f}: {n['effect']} "
                       + ", ".join(f"{k} = {n['params'][k]:.4g} [{ci[(n['effect'], k)][0]:.4g}, "

@@ -7,7 +7,8 @@ import numpy as np, pandas as pd
 from canebench.data.dataset import bundled_dataset, load_dataset
 from canebench.discovery.screen import trial_geometry
 from canebench.discovery.screenset import ScreenSet, predict_log_k
-from canebench.discovery.workflow import _pitch_table, _ok_log_k, BASELINES
+from canebench.discovery.engine_runs import BaselineEngine, ok_log_k, pitch_table
+from canebench.discovery.workflow import BASELINES
 from canebench.execute.runner import run_trials
 from canebench.execute.executors import SerialExecutor
 from canebench.model.effects import EffectSpec
@@ -17,10 +18,10 @@ EX = SerialExecutor()
 trials = load_dataset(bundled_dataset(), "b1c*,b2c1")
 backend, preset, _ = BASELINES["beam"]; cfg0 = PRESETS[preset]; proto = PROTOCOLS["fast"]
 F = pd.DataFrame({"trial": [t.id for t in trials]})
-eng = lambda specs: _ok_log_k(run_trials(trials, [backend], proto, cfg0.replace(effects=specs), None, executor=EX).to_df(), backend, F.trial)
+eng = lambda specs: ok_log_k(run_trials(trials, [backend], proto, cfg0.replace(effects=specs), None, executor=EX).to_df(), backend, F.trial)
 lkb = eng(())
 ss = ScreenSet.build([trial_geometry(t, cfg0) for t in trials])
-ss_t, _ = _pitch_table(trials, F, ss, lkb, backend, proto, cfg0, (), None, EX, None)
+ss_t, _ = pitch_table(BaselineEngine(trials, F, backend, proto, cfg0, (), None, EX, None), ss, lkb)
 pitch = EffectSpec("probe_misalignment", (("angle_deg", 30.0),))
 for other in ("modulus_scale(scale=1.7)", "root_compliance(k_root=8)"):
     o = EffectSpec.parse(other)
