@@ -466,6 +466,7 @@ def test_a_name_whose_interval_reaches_no_effect_is_withheld_and_the_rest_refitt
     assert doc["unexplained"] is True
     (u,) = doc["unsupported"]
     assert u["effect"] == "root_compliance" and u["covers_null"] == ["k_root"]
+    assert u["units"] == {"k_root": "N m/rad"}  # the unit, as for a named effect
     assert u["params"]["k_root"] == pytest.approx(15.0, rel=0.2)
     assert [r["removed"] for r in doc["selection"] if r.get("removed")] == ["root_compliance"]
     assert "for an interval that reaches no effect: root_compliance" in doc["stop_reason"]

@@ -304,7 +304,7 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
         for sp in cv_cur.fit.specs:
             if sp.name in gone:
                 unsupported.append({"effect": sp.name, "params": dict(sp.params),
-                                    "ci95": ci_of(sp, ci),
+                                    "ci95": ci_of(sp, ci), "units": sp.units(),
                                     "covers_null": idle.get(sp.name, []),
                                     **({} if sp.name == name else {"dropped_with": name})})
         size = len(current)

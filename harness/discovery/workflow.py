@@ -139,7 +139,7 @@ class DiscoveryResult:
     #: the baseline engine's nonlinear excess over the screen at extra probe pitches (:func:`.engine_runs.pitch_table`)
     pitch_table: dict[str, Any] = field(default_factory=dict)
     #: effects the selection passed but whose 95 % interval reaches no effect, not named
-    #: (``effect``, ``params``, ``ci95``, ``covers_null``; a pair partner that went with one has an
+    #: (``effect``, ``params``, ``ci95``, ``units``, ``covers_null``; a pair partner that went with one has an
     #: empty ``covers_null`` and ``dropped_with``; :func:`.selection.drop_unsupported`)
     unsupported: list[dict[str, Any]] = field(default_factory=list)
 
@@ -380,7 +380,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     for spec in final.fit.specs:
         named.append({"effect": spec.name, "scope": "global", "params": dict(spec.params),
                       "ci95": ci_of(spec, ci),
-                      "units": {p: EFFECTS[spec.name].parameters[p].unit for p, _ in spec.params}})
+                      "units": spec.units()})
         fx1 = AppliedEffects([spec.instance()])
         if fx1.changes_diameter and len(ss.cal_s):
             # what the calipers would have read differently (mm), against their own scatter

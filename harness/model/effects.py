@@ -323,6 +323,11 @@ class EffectSpec:
     def instance(self, cane_id: str | None = None, trial_id: str | None = None) -> Effect:
         return EFFECTS[self.name](**self.values_for(cane_id, trial_id))
 
+    def units(self) -> dict[str, str]:
+        """The unit of each global parameter, as the registered effect declares it."""
+        par = EFFECTS[self.name].parameters
+        return {p: par[p].unit for p, _ in self.params}
+
     def validate(self, source: str) -> None:
         load_entry_points()
         if self.name not in EFFECTS:
