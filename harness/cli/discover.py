@@ -41,7 +41,13 @@ def main(a: argparse.Namespace) -> int:
         cols = [c for c in ["id", "named", "partial", "unsupported", "unexplained", "adequacy_p", "size", "gap_before",
                             "gap_after_cv"] if c in df] + [c for c in df.columns if c.startswith("err_")]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
-        print(json.dumps(summarize(df), indent=2, default=float))
+        summary = summarize(df)
+        criteria = summary.pop("done_when")
+        print(json.dumps(summary, indent=2, default=float))
+        print("done when (issue 10):")
+        for c in criteria:
+            mark = {True: "met", False: "NOT met", None: "not measured"}[c["met"]]
+            print(f"  {mark:12s} {c['criterion']}: {c['measured']} (target {c['target']})")
         stem = "selftest_subset" if a.selftest_cases else "selftest"
         print(f"written: {out / (stem + '.csv')}, {out / (stem + '.json')}")
         return 0

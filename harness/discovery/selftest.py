@@ -333,4 +333,44 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
     for c in ("obstruction_precision", "obstruction_recall", "onset_err_mm"):
         if c in df:
             s[c] = float(df[c].mean())
+    s["done_when"] = done_when(s).to_dict("records")
     return s
+
+
+def _ratio(text: str) -> tuple[int, int]:
+    k, n = (int(v) for v in text.split("/"))
+    return k, n
+
+
+def done_when(s: dict[str, Any]) -> pd.DataFrame:
+    """Issue 10's "done when" criteria for the self-test, each against a summary (:func:`summarize`).
+
+    One row per criterion: ``criterion``, ``measured`` (as text), ``target`` and ``met`` (True,
+    False, or None where the suite holds nothing to measure it on: no large effect of that kind).
+    """
+    rows = []
+
+    def add(criterion: str, measured: str, target: str, met: bool | None) -> None:
+        rows.append({"criterion": criterion, "measured": measured, "target": target, "met": met})
+
+    rate, n = s.get("correct_rate_large_effects", math.nan), s.get("n_large_effects", 0)
+    add("correct effect named, effects > 2x the noise", f"{rate:.0%} of {n}" if n else "none",
+        ">= 90 %", bool(rate >= 0.9) if n else None)
+    for p in ("scale", "k_root", "k_rig", "angle_deg"):
+        text = s.get(f"within_20pct_{p}")
+        if text is None:
+            continue
+        k, m = _ratio(text)
+        add(f"{p} within 20 % of truth, effects > 2x the noise", text, "all", (k == m) if m else None)
+    add("false names on the nulls", str(s["false_names_on_nulls"]), "<= 1", s["false_names_on_nulls"] <= 1)
+    add("two-effect sets, both named", f"{s['pairs_both_named']}/{s['n_pairs']}", "all",
+        (s["pairs_both_named"] == s["n_pairs"]) if s["n_pairs"] else None)
+    n_ool = s["n_out_of_library"]
+    add("out-of-library sets flagged unexplained, not misnamed",
+        f"{s['out_of_library_flagged_unexplained']}/{n_ool} flagged, {s['out_of_library_misnamed']} misnamed",
+        "all flagged, 0 misnamed",
+        (s["out_of_library_flagged_unexplained"] == n_ool and s["out_of_library_misnamed"] == 0) if n_ool else None)
+    shrink = s.get("median_gap_shrink_out_of_sample", math.nan)
+    add("median |ln| gap shrink out of sample, correctly named", f"{shrink:.0%}" if np.isfinite(shrink) else "none",
+        ">= 50 %", bool(shrink >= 0.5) if np.isfinite(shrink) else None)
+    return pd.DataFrame(rows)
