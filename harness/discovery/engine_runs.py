@@ -18,7 +18,6 @@ from ..data.dataset import Trial
 from ..execute.runner import run_trials
 from ..model.config import ModelConfig
 from ..model.effects import EffectSpec
-from .verdict import ADEQUACY_ALPHA
 from .fit import Candidate, cross_validate
 from .screenset import PITCH_GRID_DEG, ScreenSet, predict_log_k
 from .shape import SHARE as SHAPE_SHARE, shape_check, shape_level, trace_shapes
@@ -125,8 +124,8 @@ def pitch_table(engine: BaselineEngine, ss: ScreenSet, lkb: np.ndarray) -> tuple
     return ss.with_pitch_table(table), summary
 
 
-def model_shape_check(engine: BaselineEngine, base_run: Any, specs: tuple[EffectSpec, ...],
-                      seed: int) -> dict[str, Any]:
+def model_shape_check(engine: BaselineEngine, base_run: Any, specs: tuple[EffectSpec, ...], seed: int,
+                      alpha: float) -> dict[str, Any]:
     """:func:`.shape.shape_check` of the fitted model ``specs`` (one more run of the baseline engine).
 
     ``base_run`` is the baseline run (its traces carry the field's rows too). Trials with an
@@ -143,7 +142,7 @@ def model_shape_check(engine: BaselineEngine, base_run: Any, specs: tuple[Effect
         free = F[no_obstruction]
         shapes = trace_shapes(list(free.trial), base_run.traces, base_run.traces, base_run.traces, backend)
         return {"p": None, "n_trials": 0, "share": SHAPE_SHARE, "reason": "no effect fitted", "engine": backend,
-                "level": shape_level(free.cane.to_numpy(), shapes, ADEQUACY_ALPHA, seed=seed)}
+                "level": shape_level(free.cane.to_numpy(), shapes, alpha, seed=seed)}
     model = engine.cfg0.replace(effects=tuple(specs) + engine.obstruction)
     run = engine.run(specs, "shape_model")
     # F holds only trials the baseline run scored ok (a finite k_base): the model run is the one to check
@@ -157,7 +156,7 @@ def model_shape_check(engine: BaselineEngine, base_run: Any, specs: tuple[Effect
 
     shapes = trace_shapes(list(free.trial), base_run.traces, base_run.traces, run.traces, backend, measured)
     out = shape_check(free.cane.to_numpy(), shapes, seed=seed)
-    out["level"] = shape_level(free.cane.to_numpy(), shapes, ADEQUACY_ALPHA, seed=seed)
+    out["level"] = shape_level(free.cane.to_numpy(), shapes, alpha, seed=seed)
     out["n_trials_not_ok"] = int((~ok).sum())
     out["test"] = ("one-sided: do the traces show at least the share of the fitted model's change in their "
                    "stiffening over the push (its run on the baseline engine against the baseline's)?")

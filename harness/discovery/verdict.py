@@ -70,14 +70,15 @@ class Verdict:
 def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.ndarray, ss0: ScreenSet,
           lkb0: np.ndarray, ss: ScreenSet, lkb: np.ndarray, final: Any, current: tuple[str, ...],
           candidates: tuple[str, ...], unsupported: list[dict[str, Any]], named: list[dict[str, Any]],
-          diameter_factor: float, shape_of: Callable[[tuple], dict[str, Any]], notes: list[str],
+          diameter_factor: float, shape_of: Callable[[tuple, float], dict[str, Any]], notes: list[str],
           timing: dict[str, float], seed: int = 0) -> Verdict:
     """Run the checks on the selection's model (``final``, cross-validated; ``current`` its effects).
 
     ``F`` holds the scored trials (``cane``, ``height_m``, the residuals and ``log_k_model_cv``);
     ``r_before``/``r_after`` are the baseline's and the model's held-out residuals; ``ss0, lkb0``
-    the screen and ln k of the baseline, ``ss, lkb`` of the last anchor. ``shape_of(specs)`` runs
-    the traces' shape check of a model on the engine (:func:`.engine_runs.model_shape_check`).
+    the screen and ln k of the baseline, ``ss, lkb`` of the last anchor. ``shape_of(specs, alpha)``
+    runs the traces' shape check of a model on the engine at level ``alpha``
+    (:func:`.engine_runs.model_shape_check`).
     Notes are appended to ``notes``, durations to ``timing``.
     """
     # -- structure before and after
@@ -111,7 +112,7 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     # the traces' shape: a model that predicts they bend (a pitched probe's tension) where they do
     # not is not their explanation, whatever it fits of the stiffness (.shape)
     t_s = time.perf_counter()
-    adequacy["shape"] = shape_of(final.fit.specs)
+    adequacy["shape"] = shape_of(final.fit.specs, ADEQUACY_ALPHA)
     timing["shape_s"] = time.perf_counter() - t_s
     shape_p = adequacy["shape"].get("p")
     shape_fails = shape_p is not None and shape_p < ADEQUACY_ALPHA

@@ -1,4 +1,4 @@
-"""``canebench discover``: the discovery workflow as one function.
+"""``canebench discover``: the discovery workflow, one function (:func:`discover`) over its stages.
 
 1. Baseline: every trial probed on the baseline model through the job runner
    (``beam``: the converged beam reference; ``chain``: the beam-consistent
@@ -227,7 +227,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         candidates (Bonferroni) and the pair test when a pair can still be added.
     min_change : float
         Materiality: the smallest mean |change in ln k| over the trials that naming an effect must
-        make to the fitted model (:data:`MIN_CHANGE`).
+        make to the fitted model (:data:`.selection.MIN_CHANGE`).
     """
     t_start = time.perf_counter()
     from ..execute.progress import Progress
@@ -399,9 +399,11 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     timing["bootstrap_s"] = time.perf_counter() - t4
 
     # -- is it an explanation?
+    def shape_of(specs, alpha):
+        return engine_runs.model_shape_check(engine, run, specs, seed, alpha)
+
     verdict = judge(F, r_before, r_after, lkf, ss0, lkb0, ss, lkb, final, current, candidates, unsupported, named,
-                    cfg0.diameter_factor, lambda specs: engine_runs.model_shape_check(engine, run, specs, seed), notes,
-                    timing, seed)
+                    cfg0.diameter_factor, shape_of, notes, timing, seed)
     named, partial, adequacy = verdict.named, verdict.partial, verdict.adequacy
     fitted = tuple(final.fit.specs)
     gap = {"before": _gap(r_before), "after_cv": _gap(r_after), "after_in_sample": _gap(F.r_after_in.to_numpy())}
