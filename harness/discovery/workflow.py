@@ -399,8 +399,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     timing["bootstrap_s"] = time.perf_counter() - t4
 
     # -- is it an explanation?
-    def shape_of(specs, alpha):
-        return engine_runs.model_shape_check(engine, run, specs, seed, alpha)
+    def shape_of(specs, level):
+        return engine_runs.model_shape_check(engine, run, specs, seed, level)
 
     verdict = judge(F, r_before, r_after, lkf, ss0, lkb0, ss, lkb, final, current, candidates, unsupported, named,
                     cfg0.diameter_factor, shape_of, notes, timing, seed)
