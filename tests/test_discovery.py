@@ -820,6 +820,28 @@ def test_the_selftest_reports_each_done_when_criterion_against_the_issues_target
         "out-of-library sets flagged unexplained, not misnamed"] is False
 
 
+def test_the_fit_s_first_simplex_steps_every_parameter_across_its_range_even_from_zero():
+    """scipy's Nelder-Mead steps a coordinate at 0 by 0.00025 only; the start grid puts a scale
+    (log 1) and a pitch at 0, and from there a scale + rig pair was fitted scale 1.000 (fit.py,
+    SIMPLEX_STEP). Each vertex must move one parameter by a tenth of its search range, inward at
+    a bound."""
+    from canebench.discovery.fit import Candidate
+    from canebench.model.effects import EFFECTS
+
+    cand = Candidate.of(("modulus_scale", "rig_compliance", "probe_misalignment"))
+    ranges = []
+    for n, p in cand.free:
+        par = EFFECTS[n].parameters[p]
+        ranges.append(math.log(par.high / par.low) if par.log else par.high - par.low)
+    x0 = np.array([0.0, math.log(EFFECTS["rig_compliance"].parameters["k_rig"].high), 0.0])
+    sim = cand.simplex(x0)
+    assert sim.shape == (4, 3) and np.array_equal(sim[0], x0)
+    steps = sim[1:] - x0
+    np.testing.assert_allclose(np.abs(np.diag(steps)), 0.1 * np.array(ranges))
+    assert np.count_nonzero(steps) == 3
+    assert steps[1, 1] < 0  # the rig starts at its upper bound: its vertex steps inward
+
+
 def test_the_selftest_kinds_survive_a_csv_round_trip():
     """``selftest.csv`` is read back by users with pandas' defaults, which turn the strings
     ``null``, ``NA``, ``None``... into NaN: a kind spelled that way would vanish from
