@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
-from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
+from ..model.effects import EFFECTS, AppliedEffects, EffectSpec, Parameter
 from .screenset import ScreenSet, predict_log_k
 
 SIGMA_FLOOR = 0.01  # ln units: below the field slope's own standard error on any trial
@@ -39,6 +39,11 @@ SIGMA_FLOOR = 0.01  # ln units: below the field slope's own standard error on an
 #: 45.7 N/m rig (``tests/scripts/pairs_outside_the_suite.py OUT 98``, set 00), was fitted scale
 #: 1.000 with a 91 N/m rig (BIC -60.8) where scale 0.48 with a 44.5 N/m rig gives -99.1.
 SIMPLEX_STEP = 0.1
+
+
+def _bounds(par: Parameter) -> tuple[float, float]:
+    """A parameter's search bounds in the optimizer's coordinates (log for a log parameter)."""
+    return (math.log(par.low), math.log(par.high)) if par.log else (par.low, par.high)
 
 
 @dataclass
@@ -65,7 +70,7 @@ class Candidate:
         vals: dict[str, dict[str, float]] = {n: {} for n in self.names}
         for (n, p), xi in zip(self.free, x):
             par = EFFECTS[n].parameters[p]
-            lo, hi = (math.log(par.low), math.log(par.high)) if par.log else (par.low, par.high)
+            lo, hi = _bounds(par)
             xi = min(max(float(xi), lo), hi)
             vals[n][p] = math.exp(xi) if par.log else xi
         return tuple(EffectSpec(n, tuple(sorted(vals[n].items()))) for n in self.names)
@@ -75,8 +80,7 @@ class Candidate:
         ``share`` of its search range, toward the inside where a step would leave it."""
         sim = [np.asarray(x0, float)]
         for i, (n, p) in enumerate(self.free):
-            par = EFFECTS[n].parameters[p]
-            lo, hi = (math.log(par.low), math.log(par.high)) if par.log else (par.low, par.high)
+            lo, hi = _bounds(EFFECTS[n].parameters[p])
             step = share * (hi - lo)
             v = sim[0].copy()
             v[i] += step if v[i] + step <= hi else -step
@@ -86,8 +90,7 @@ class Candidate:
     def grid(self, n_per: int = 7) -> list[np.ndarray]:
         axes = []
         for n, p in self.free:
-            par = EFFECTS[n].parameters[p]
-            lo, hi = (math.log(par.low), math.log(par.high)) if par.log else (par.low, par.high)
+            lo, hi = _bounds(EFFECTS[n].parameters[p])
             axes.append(np.linspace(lo, hi, n_per))
         if not axes:
             return [np.zeros(0)]

@@ -6,12 +6,12 @@ Run from the repository: ``python tests/scripts/weak_pitch_intervals.py OUT`` (a
 set on one core). The interval rule refuses a pitch whose percentile interval reaches 0; a pitch
 whose resamples split between +a and -a would be refused with no resample near 0.
 """
-import json
 import sys
 from pathlib import Path
 
 from canebench.canes.generate_hidden import generate_hidden
 from canebench.data.dataset import load_dataset
+from canebench.discovery.selftest import _effect_size
 from canebench.discovery.workflow import discover
 from canebench.execute.executors import make_executor
 
@@ -20,10 +20,7 @@ for i, angle in enumerate((12.0, -12.0, 15.0, -15.0, 18.0, -18.0)):
     d = generate_hidden(out / f"pitch{angle:+.0f}", 9600 + i, {"probe_misalignment": {"angle_deg": angle}})
     res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=100,
                    out=out / f"pitch{angle:+.0f}" / "out")
-    truth = json.loads((d / "truth" / "truth.json").read_text())
-    size = sorted(abs(__import__("math").log(tr["k_effect_n_per_mm"] / tr["k_plain_n_per_mm"]))
-                  for c in truth["canes"].values() for tr in c["trials"].values())
-    print(f"hidden {angle:+.0f} deg (median |d ln k| {size[len(size) // 2]:.3f}): "
+    print(f"hidden {angle:+.0f} deg (median |d ln k| {_effect_size(d):.3f}): "
           f"named {[(n['effect'], n['params'], n.get('ci95')) for n in res.named if n['scope'] == 'global']}; "
           f"refused {[(u['effect'], u['params'], u['ci95']) for u in res.unsupported]}; "
           f"unexplained {res.unexplained}", flush=True)
