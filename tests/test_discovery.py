@@ -525,6 +525,33 @@ def test_of_the_effects_that_pass_the_one_with_the_lowest_bic_is_named(tmp_path,
     assert sh["p"] > 0.05 and sh["beta"] > 0.5 and sh["predicted_mean"] > 0.05, sh
 
 
+def test_a_material_effect_is_not_named_where_one_too_small_to_name_fits_better(tmp_path):
+    """A probe pitched 15 degrees (seed 9602, the weak-pitch study's set: median |d ln k| 0.044,
+    under twice the noise): the pitch passes significance with the lowest BIC but moves the model
+    by 0.045 in mean |ln k|, under the materiality rule's 0.05, and a modulus scale, which takes
+    the level, passes every rule. Naming the scale would put the level on the wrong physics;
+    nothing is named, and the stop reason says why. (Before the rule, the scale was named, 1.30.)"""
+    from canebench.canes.generate_hidden import generate_hidden
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.selection import MIN_CHANGE
+    from canebench.discovery.workflow import discover
+    from canebench.execute.executors import make_executor
+
+    d = generate_hidden(tmp_path / "pitch", 9602, {"probe_misalignment": {"angle_deg": 15.0}})
+    res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+                   candidates=("modulus_scale", "probe_misalignment"))
+    first = res.steps[res.steps.step == 1].set_index("candidate")
+    scale, pitch = first.loc["modulus_scale"], first.loc["probe_misalignment"]
+    # the case the rule is for: the scale passes every rule; the pitch fails materiality alone
+    assert scale.passed and scale.net_change_mean_abs >= MIN_CHANGE, scale
+    assert not pitch.passed and pitch.net_change_mean_abs < MIN_CHANGE, pitch
+    assert pitch.p < pitch.level and pitch.cv_relative_gain > 0.05, pitch
+    assert pitch.bic < scale.bic and scale.outranked_by == "probe_misalignment"
+    assert res.named == [], res.named
+    assert "probe_misalignment" in res.stop_reason and "too small to name" in res.stop_reason
+    assert res.gap["after_cv"] == res.gap["before"]
+
+
 def test_a_pair_displaces_a_single_that_mimics_its_sum(tmp_path):
     """A soft root (41 N m/rad) with a stiffer material (scale 1.72), the strengths an independent
     generator hid in its ds10: the two cancel in the mean (the scale alone does not lean the

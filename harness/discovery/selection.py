@@ -3,7 +3,8 @@
 Step 4 of :mod:`.workflow`. :func:`forward_select` adds, one step at a time, the library effect
 (or pair) that passes every naming rule with the lowest BIC, re-anchoring the screen on the
 baseline engine after each (``reanchor``, :func:`.engine_runs.reanchor`) and running the
-backward pass (:func:`backward`) after each addition; :func:`drop_unsupported` then takes out
+backward pass (:func:`backward`) after each addition; it stops when a single effect too small to
+name (it fails only the materiality rule) fits better than every one that passes; :func:`drop_unsupported` then takes out
 the effects whose 95 % interval reaches no effect (:func:`.nulls.covers_null`).
 """
 
@@ -90,8 +91,8 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
         # scatter moves the mean |r| but can leave the median where it was; and a flare fitted
         # to the within-cane pattern can raise the median of an effect smaller than the canes'
         # scatter while it lowers the mean); and the model changes by at least min_change
-        passed = (gain > MIN_REDUCTION * float(l1_cur.mean()) and p < level and cv.fit.bic < cv_cur.fit.bic
-                  and net >= min_change)
+        significant = gain > MIN_REDUCTION * float(l1_cur.mean()) and p < level and cv.fit.bic < cv_cur.fit.bic
+        passed = significant and net >= min_change
         row = {"step": len(current) + 1, "model": "+".join(current + add), "candidate": "+".join(add),
                "cv_gain_per_cane": gain,
                "cv_relative_gain": gain / float(l1_cur.mean()) if l1_cur.mean() > 0 else 0.0,
@@ -99,7 +100,8 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
                "p": p, "p_heldout_gain": sign_flip_p(diff, seed=seed), "level": level, "aic": cv.fit.aic,
                "bic": cv.fit.bic, "cv_median_abs": med, "net_change_mean_abs": net,
                "params": {s.name: dict(s.params) for s in cv.fit.specs}, "chosen": False}
-        return {"add": add, "cv": cv, "gain": gain, "p": p, "net": net, "passed": passed, "row": row}
+        return {"add": add, "cv": cv, "gain": gain, "p": p, "net": net, "significant": significant,
+                "passed": passed, "row": row}
 
     while True:
         pool = [c for c in candidates if c not in current]
@@ -143,10 +145,29 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
         # also scores the pattern within canes, which tells them apart (BIC 36 apart). When none
         # passes, the best by held-out gain is what the stop reason reports.
         best = min(ok, key=lambda t: t["cv"].fit.bic) if ok else max(tried, key=lambda t: t["gain"])
+        # ... unless a single effect that fails materiality alone fits better still: then the
+        # residual's best explanation is too small to name, and a material rival named in its
+        # place would take the level for the wrong physics (a hidden 15 deg pitch, 0.044 in ln k:
+        # the pitch fitted 10 deg with BIC -76.6 but moved the model by 0.045; a modulus scale of
+        # 1.30, BIC -71.4, was named; docs/discovery.md, weak pitches)
+        small = [t for t in tried if len(t["add"]) == 1 and t["significant"] and not t["passed"]]
+        outranked = ok and small and min(t["cv"].fit.bic for t in small) < best["cv"].fit.bic
+        if outranked:
+            top = min(small, key=lambda t: t["cv"].fit.bic)
+            for t in ok:
+                t["row"]["outranked_by"] = top["add"][0]
+            ok = []
         best["row"]["chosen"] = bool(ok)
         for t in tried:  # which rivals passed every rule (the chosen row need not have the largest gain)
             t["row"]["passed"] = bool(t["passed"])
         steps.extend(t["row"] for t in tried)
+        if outranked:
+            stop = (f"the best fit that passes significance, {top['add'][0]} (BIC {top['cv'].fit.bic:.1f}, "
+                    f"p = {top['p']:.3g}), changes the model by {top['net']:.3g} in mean |ln k|, under "
+                    f"{min_change:.3g}: too small to name, and the material rivals that pass "
+                    f"({', '.join('+'.join(t['add']) for t in tried if t['passed'])}) fit worse"
+                    + (f"; dropped as stale on the way: {', '.join(removed)}" if removed else ""))
+            break
         if ok:
             current = current + best["add"]
             visited.add(frozenset(current))
