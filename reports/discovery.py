@@ -69,7 +69,7 @@ def figures(out: str | Path) -> list[Path]:
 def section(folder: str | Path) -> str:
     """HTML section for a folder holding ``discovery.json`` (empty string if none)."""
     from canebench.discovery.checks_text import adequacy_lines
-    from canebench.discovery.verdict import INADEQUATE
+    from canebench.discovery.verdict import UNEXPLAINED_WHY
 
     folder = Path(folder)
     f = folder / "discovery.json"
@@ -119,7 +119,7 @@ def section(folder: str | Path) -> str:
 {g['before']['median_abs_log_ratio']:.3f} (worst {g['before']['worst_abs_log_ratio']:.3f}) before;
 {g['after_cv']['median_abs_log_ratio']:.3f} (worst {g['after_cv']['worst_abs_log_ratio']:.3f}) after, out of sample
 (leave one cane out). Share of the residual variance between canes: {bs.get('before', float('nan')):.2f} before,
-{bs.get('after_cv', float('nan')):.2f} after{' (the partial model)' if doc.get('partial') else ''}. Unexplained (residual structure, a model that {INADEQUATE}, or an effect that passed the selection but not its interval): <b>{doc['unexplained']}</b>.
+{bs.get('after_cv', float('nan')):.2f} after{' (the partial model)' if doc.get('partial') else ''}. Unexplained ({UNEXPLAINED_WHY}): <b>{doc['unexplained']}</b>.
 Selection stopped: {html.escape(doc.get('stop_reason', ''))}.</p>
 <table><tr><th>named effect</th><th>scope</th><th>parameters (95 % cane-bootstrap interval)</th></tr>{''.join(rows) or '<tr><td colspan=3>nothing named</td></tr>'}</table>
 {eng}

@@ -530,7 +530,8 @@ def test_a_material_effect_is_not_named_where_one_too_small_to_name_fits_better(
     under twice the noise): the pitch passes significance with the lowest BIC but moves the model
     by 0.045 in mean |ln k|, under the materiality rule's 0.05, and a modulus scale, which takes
     the level, passes every rule. Naming the scale would put the level on the wrong physics;
-    nothing is named, and the stop reason says why. (Before the rule, the scale was named, 1.30.)"""
+    nothing is named, the stop reason says why, and the result is flagged unexplained. (Before the
+    rule, the scale was named, 1.30.)"""
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
     from canebench.discovery.selection import MIN_CHANGE
@@ -547,9 +548,18 @@ def test_a_material_effect_is_not_named_where_one_too_small_to_name_fits_better(
     assert not pitch.passed and pitch.net_change_mean_abs < MIN_CHANGE, pitch
     assert pitch.p < pitch.level and pitch.cv_relative_gain > 0.05, pitch
     assert pitch.bic < scale.bic and scale.outranked_by == "probe_misalignment"
+    # the pair was judged with no passing single as its rival, and the pitch beside the scale is
+    # immaterial too: it does not pass either
+    pair = first.loc["modulus_scale+probe_misalignment"]
+    assert not pair.passed and list(pair.passenger) == ["probe_misalignment"], pair
     assert res.named == [], res.named
     assert "probe_misalignment" in res.stop_reason and "too small to name" in res.stop_reason
     assert res.gap["after_cv"] == res.gap["before"]
+    # the residual leaned toward the pitch significantly and nothing named takes it: unexplained
+    ts = res.to_json()["too_small_to_name"]
+    assert ts["effect"] == "probe_misalignment" and ts["outranked"] == ["modulus_scale"], ts
+    assert ts["net_change_mean_abs"] == pytest.approx(pitch.net_change_mean_abs)
+    assert res.unexplained and any("too small to name" in n for n in res.notes), res.notes
 
 
 def test_a_pair_displaces_a_single_that_mimics_its_sum(tmp_path):

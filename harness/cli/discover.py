@@ -52,7 +52,7 @@ def main(a: argparse.Namespace) -> int:
         print(f"written: {out / (stem + '.csv')}, {out / (stem + '.json')}")
         return 0
     from ..discovery.checks_text import adequacy_lines
-    from ..discovery.verdict import INADEQUATE
+    from ..discovery.verdict import INADEQUATE, UNEXPLAINED_WHY
     from ..discovery.workflow import discover
     from ..execute.progress import Progress
 
@@ -87,6 +87,10 @@ def main(a: argparse.Namespace) -> int:
         print(f"  named: nothing; the library's best account (partial, above) {INADEQUATE}")
     elif doc.get("unsupported") and not any(n["scope"] == "global" for n in doc["named"]):
         print("  named: no global effect; what passed the selection did not pass its interval (above): unexplained")
+    elif doc.get("too_small_to_name") and not any(n["scope"] == "global" for n in doc["named"]):
+        ts = doc["too_small_to_name"]
+        print(f"  named: nothing; the best fit, {ts['effect']} {_params_text(ts)}, is too small to name "
+              f"(it changes the model by {ts['net_change_mean_abs']:.3g} in mean |ln k|): unexplained")
     elif not doc["named"]:
         print("  named: nothing in the library explains the residual significantly")
     print(f"  stopped: {doc['stop_reason']}")
@@ -102,9 +106,7 @@ def main(a: argparse.Namespace) -> int:
               f"(linear screen alone {v.get('linear_screen_vs_engine_max', float('nan')):.2g})")
     for line in adequacy_lines(doc):
         print(f"  {line}")
-    print(f"  unexplained (residual structure, a model that does not fit the data's scaling or shape, or an effect "
-          f"that passed the selection but not its interval): "
-          f"{doc['unexplained']}")
+    print(f"  unexplained ({UNEXPLAINED_WHY}): {doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")
     return 0
 

@@ -3,9 +3,10 @@
 Step 4 of :mod:`.workflow`. :func:`forward_select` adds, one step at a time, the library effect
 (or pair) that passes every naming rule with the lowest BIC, re-anchoring the screen on the
 baseline engine after each (``reanchor``, :func:`.engine_runs.reanchor`) and running the
-backward pass (:func:`backward`) after each addition; it stops when a single effect too small to
-name (it fails only the materiality rule) fits better than every one that passes; :func:`drop_unsupported` then takes out
-the effects whose 95 % interval reaches no effect (:func:`.nulls.covers_null`).
+backward pass (:func:`backward`) after each addition; it stops where a single effect too small
+to name (it fails only the materiality rule) fits better than every one that passes.
+:func:`drop_unsupported` then takes out the effects whose 95 % interval reaches no effect
+(:func:`.nulls.covers_null`).
 """
 
 from __future__ import annotations
@@ -49,12 +50,20 @@ class Selection:
     entered: list[tuple[str, ...]]  # the effects as they entered the model (a pair together)
     removed: list[str]  # named, then found stale by the backward pass
     stop: str  # why the search stopped
+    #: the single effect too small to name that fitted better than every one that passed, where that
+    #: stopped the search (``effect``, ``params``, ``units``, ``step``, ``p``, ``bic``,
+    #: ``net_change_mean_abs``, ``outranked``: the effects that passed every rule), else None
+    too_small: dict[str, Any] | None = None
 
 
 def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, lkb: np.ndarray,
                    reanchor: Callable[..., Any], alpha: float = ALPHA, max_effects: int = 3,
                    min_change: float = MIN_CHANGE, seed: int = 0) -> Selection:
     """Add effects while one (or a pair) passes every naming rule; see :mod:`.workflow`, step 4.
+
+    The search also stops, naming nothing at that step, where a single effect that fails only the
+    materiality rule fits better (a lower BIC) than every single that passes and no pair passes
+    (:attr:`Selection.too_small`; the caller flags the result unexplained).
 
     ``reanchor(ss, lkb, cv)`` runs the baseline engine with the model ``cv`` holds and returns
     the screen anchored there, the engine's ln k and the model cross-validated again.
@@ -68,6 +77,7 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
     cv_cur = cross_validate(Candidate.of(()), ss, lkf, lkb)
     steps: list[dict[str, Any]] = []
     stop = ""
+    too_small: dict[str, Any] | None = None
 
     def evaluate(add: tuple[str, ...], level: float, l1_cur: np.ndarray, test: Any = None,
                  full: Any = None) -> dict[str, Any]:
@@ -122,6 +132,18 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
         level = share * alpha / len(remaining)
         tried = [evaluate((c,), level, l1_cur) for c in remaining]
         ok = [t for t in tried if t["passed"]]
+        # a single effect too small to name (it fails materiality alone) that fits better than every
+        # single that passes outranks them: the residual's best explanation is then too small to
+        # name, and a material rival named in its place would take the level for the wrong physics
+        # (a hidden 15 deg pitch, 0.044 in ln k: the pitch fitted 10 deg with BIC -76.6 but moved
+        # the model by 0.045; a modulus scale of 1.30, BIC -71.4, was named; docs/discovery.md)
+        small = [t for t in tried if t["significant"] and not t["passed"]]
+        top = min(small, key=lambda t: t["cv"].fit.bic) if small else None
+        outranked = [t for t in ok if top is not None and top["cv"].fit.bic < t["cv"].fit.bic]
+        if ok and len(outranked) == len(ok):
+            ok = []  # and the pair below is judged as if no single passed: none stands as its rival
+        else:
+            outranked = []
         if pairs_possible:
             # two effects that cancel to first order (a flexing rig softens the stiff low pushes
             # that a flared base stiffens) show up only together; and two that each move the level
@@ -138,34 +160,31 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
                 tp = evaluate(best_pair, 0.5 * alpha, l1_cur, test=pairs, full=fits[i])
                 _judge_pair(tp, best_pair, tried, ok, current, ss, lkf, lkb, min_change)
                 tried.append(tp)
-                ok = [t for t in tried if t["passed"]]
+                if tp["passed"]:
+                    ok.append(tp)
         # among those that pass, the lowest BIC is named: the held-out L1 gain scores mostly the
         # level a candidate moves, and effects that all shift it come out close (a pitched probe
         # and a modulus scale on canes that scatter 0.3 in ln: 0.213 and 0.227); the likelihood
         # also scores the pattern within canes, which tells them apart (BIC 36 apart). When none
-        # passes, the best by held-out gain is what the stop reason reports.
+        # passes, the best by held-out gain is what the stop reason reports. (A pair that passes
+        # has the lowest BIC of all: it is tried only when it beats every single.)
         best = min(ok, key=lambda t: t["cv"].fit.bic) if ok else max(tried, key=lambda t: t["gain"])
-        # ... unless a single effect that fails materiality alone fits better still: then the
-        # residual's best explanation is too small to name, and a material rival named in its
-        # place would take the level for the wrong physics (a hidden 15 deg pitch, 0.044 in ln k:
-        # the pitch fitted 10 deg with BIC -76.6 but moved the model by 0.045; a modulus scale of
-        # 1.30, BIC -71.4, was named; docs/discovery.md, weak pitches)
-        small = [t for t in tried if len(t["add"]) == 1 and t["significant"] and not t["passed"]]
-        outranked = ok and small and min(t["cv"].fit.bic for t in small) < best["cv"].fit.bic
-        if outranked:
-            top = min(small, key=lambda t: t["cv"].fit.bic)
-            for t in ok:
-                t["row"]["outranked_by"] = top["add"][0]
-            ok = []
         best["row"]["chosen"] = bool(ok)
         for t in tried:  # which rivals passed every rule (the chosen row need not have the largest gain)
             t["row"]["passed"] = bool(t["passed"])
+        if outranked and not ok:
+            for t in outranked:
+                t["row"]["outranked_by"] = top["add"][0]
+            sp = next(sp for sp in top["cv"].fit.specs if sp.name == top["add"][0])
+            too_small = {"effect": sp.name, "params": dict(sp.params), "units": sp.units(), "step": len(current) + 1,
+                         "p": top["p"], "bic": top["cv"].fit.bic, "net_change_mean_abs": top["net"],
+                         "outranked": ["+".join(t["add"]) for t in outranked]}
         steps.extend(t["row"] for t in tried)
-        if outranked:
-            stop = (f"the best fit that passes significance, {top['add'][0]} (BIC {top['cv'].fit.bic:.1f}, "
-                    f"p = {top['p']:.3g}), changes the model by {top['net']:.3g} in mean |ln k|, under "
-                    f"{min_change:.3g}: too small to name, and the material rivals that pass "
-                    f"({', '.join('+'.join(t['add']) for t in tried if t['passed'])}) fit worse"
+        if too_small and not ok:
+            stop = (f"the best-fitting single effect that passes significance, {too_small['effect']} (BIC "
+                    f"{too_small['bic']:.1f}, p = {too_small['p']:.3g}), changes the model by "
+                    f"{too_small['net_change_mean_abs']:.3g} in mean |ln k|, under {min_change:.3g}: too small "
+                    f"to name, and those that pass every rule ({', '.join(too_small['outranked'])}) fit worse"
                     + (f"; dropped as stale on the way: {', '.join(removed)}" if removed else ""))
             break
         if ok:
@@ -186,7 +205,7 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
                 f"{'; BIC does not improve' if best['cv'].fit.bic >= cv_cur.fit.bic else ''})"
                 + (f"; dropped as stale on the way: {', '.join(removed)}" if removed else ""))
         break
-    return Selection(current, cv_cur, ss, lkb, steps, entered, removed, stop)
+    return Selection(current, cv_cur, ss, lkb, steps, entered, removed, stop, too_small)
 
 
 def _judge_pair(tp: dict[str, Any], pair: tuple[str, str], tried: list[dict[str, Any]], ok: list[dict[str, Any]],

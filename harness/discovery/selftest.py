@@ -168,6 +168,7 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
                            "partial": "+".join(n["effect"] for n in doc.get("partial", [])),
                            # passed the selection, not named: an interval that reaches no effect
                            "unsupported": "+".join(u["effect"] for u in doc.get("unsupported", [])),
+                           "too_small": (doc.get("too_small_to_name") or {}).get("effect", ""),
                            "size": _effect_size(folder), "wall_s": time.perf_counter() - t0,
                            "gap_before": doc["gap"]["before"]["median_abs_log_ratio"],
                            "gap_after_cv": doc["gap"]["after_cv"]["median_abs_log_ratio"]}

@@ -53,6 +53,9 @@ WITHIN_FLOOR = 0.10
 #: why names are withheld (the three adequacy checks), in every output that says so
 INADEQUATE = ("does not scale across canes, share the stiffness along a cane (in trend or in spread), or bend the "
               "traces as the data do")
+#: what sets ``unexplained``, as the CLI and the report say it
+UNEXPLAINED_WHY = (f"residual structure, a model that {INADEQUATE}, an effect that passed the selection but not its "
+                   f"interval, or a best fit too small to name")
 
 
 @dataclass

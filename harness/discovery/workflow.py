@@ -15,7 +15,11 @@
    (leave-one-cane-out: the held-out mean |ln| per cane falls by 5 %), lower
    BIC, and change the model by at least :data:`.selection.MIN_CHANGE` (materiality).
    Of those that pass, the one with the lowest BIC is named (the held-out
-   L1 gain mostly scores the level an effect moves, which several share).
+   L1 gain mostly scores the level an effect moves, which several share),
+   unless a single effect that fails materiality alone fits better still:
+   then the residual's best account is too small to name, nothing is named
+   at that step, the search stops, and the result is ``unexplained``
+   (``too_small_to_name`` in discovery.json).
    After each named effect the baseline engine is re-run with the model so
    far and the screen re-anchored on it (:func:`.engine_runs.reanchor`): the screen is
    linear, the engines are not. The pair with the best BIC is tested jointly
@@ -25,7 +29,7 @@
    gain out of sample beside the other). Each
    step's alpha is split in halves between the single effects (Bonferroni)
    and the pair (one score test over every pair's joint directions).
-   Repeated until nothing passes. After each addition a backward pass
+   Repeated until nothing passes (or the best fit is too small to name). After each addition a backward pass
    (:func:`.selection.backward`) drops any earlier effect whose removal (the others
    refitted) changes the model by less than :data:`.selection.MIN_CHANGE`: an effect
    named early can go stale once a later one explains its share. No forward
@@ -142,6 +146,8 @@ class DiscoveryResult:
     #: (``effect``, ``params``, ``ci95``, ``units``, ``covers_null``; a pair partner that went with one has an
     #: empty ``covers_null`` and ``dropped_with``; :func:`.selection.drop_unsupported`)
     unsupported: list[dict[str, Any]] = field(default_factory=list)
+    #: the single effect too small to name whose better fit stopped the search (:attr:`.selection.Selection.too_small`)
+    too_small_to_name: dict[str, Any] | None = None
 
     def to_df(self) -> pd.DataFrame:
         return self.trials
@@ -156,7 +162,8 @@ class DiscoveryResult:
                 row["excluded"] = True  # a soft contact before the field stage's knee: not scored
             tr.append(row)
         return {"baseline": self.baseline, "named": self.named, "unexplained": bool(self.unexplained),
-                "partial": self.partial, "unsupported": self.unsupported, "gap": self.gap, "trials": tr,
+                "partial": self.partial, "unsupported": self.unsupported,
+                "too_small_to_name": self.too_small_to_name, "gap": self.gap, "trials": tr,
                 "stop_reason": self.stop_reason,
                 "notes": self.notes,
                 # NaN (a column a row does not have) as null: strict JSON
@@ -357,6 +364,13 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                          f"longer stands")
     if stale:
         notes.append(f"dropped as stale once an effect was not named: {', '.join(stale)}")
+    if sel.too_small:
+        ts = sel.too_small
+        notes.append(f"{ts['effect']} (" + ", ".join(f"{k} = {v:.4g}" for k, v in ts["params"].items())
+                     + f") fitted the residual best at step {ts['step']} (BIC {ts['bic']:.1f}; the residuals lean "
+                     f"its way, p = {ts['p']:.2g}) but changes the model by {ts['net_change_mean_abs']:.3g} in mean "
+                     f"|ln k|, under {min_change:.3g}: too small to name; {', '.join(ts['outranked'])} passed every "
+                     f"rule but fit worse and is not named in its place; the result is flagged unexplained")
     if unsupported:
         stop += "; not named, for an interval that reaches no effect: " + ", ".join(
             u["effect"] + ("" if u["covers_null"] else f" (with {u['dropped_with']})") for u in unsupported)
@@ -430,10 +444,11 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             "before_median", "before_worst", "after_median", "after_worst", "after_cv_median", "after_cv_worst",
             "screen_vs_engine_max", "linear_screen_vs_engine_max")}} for r in engines.itertuples()}
     timing["total_s"] = time.perf_counter() - t_start
-    result = DiscoveryResult(baseline, named, verdict.unexplained, gap, feats, pd.DataFrame(steps),
-                             verdict.structure_before, verdict.structure_after, model, engines,
+    # the best account of what the residual leans toward was too small to name: it stays unexplained
+    result = DiscoveryResult(baseline, named, verdict.unexplained or sel.too_small is not None, gap, feats,
+                             pd.DataFrame(steps), verdict.structure_before, verdict.structure_after, model, engines,
                              stop, notes, timing, anchors, adequacy, partial, partial_config,
-                             pitch_table, unsupported)
+                             pitch_table, unsupported, sel.too_small)
     result.notes.append(f"baseline: {base_text}")
     if any(t.cane.provenance.get("assumptions") for t in trials):
         for a in dict.fromkeys(a for t in trials for a in t.cane.provenance.get("assumptions", [])):
