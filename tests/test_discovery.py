@@ -879,6 +879,34 @@ def test_the_fit_s_first_simplex_steps_every_parameter_across_its_range_even_fro
     assert steps[1, 1] < 0  # the rig starts at its upper bound: its vertex steps inward
 
 
+def test_the_fit_restarts_nelder_mead_that_stalls_on_a_corner_of_its_box():
+    """The fit's objective clips its parameters into their search box, so it is flat outside, and
+    a simplex that strays there can shrink onto a corner (seed 7's rig + flare set: the flare at
+    both of its bounds, BIC -67.0 where -99.0 exists; fit.nelder_mead_in_box). Here a curved
+    valley meets the face y = 0 and runs along it: the optimum on the box is x = 6.6/7, y = 0,
+    f = 0.2/7 (minimize (x - 0.8)^2 + 2.5 (1 - x)^2 along the face). From these starts plain
+    Nelder-Mead with the same first simplex stops on the corner (1, 0), f = 0.04 (checked below,
+    so the case is a real one); restarted from its answer it reaches the optimum."""
+    from scipy.optimize import minimize
+
+    from canebench.discovery.fit import first_simplex, nelder_mead_in_box
+
+    lo, hi = np.zeros(2), np.ones(2)
+
+    def f(x):
+        x = np.clip(x, lo, hi)
+        return (x[0] - 0.8) ** 2 + 10 * (x[1] + 0.5 - 0.5 * x[0]) ** 2
+
+    for x0 in ([0.60663578, 0.72949656], [0.86317892, 0.54146122], [0.67062441, 0.64718951]):
+        x0 = np.array(x0)
+        plain = minimize(f, x0, method="Nelder-Mead",
+                         options={"xatol": 1e-4, "fatol": 1e-6, "initial_simplex": first_simplex(x0, lo, hi)})
+        assert plain.fun == pytest.approx(0.04, abs=1e-6)  # stalled on the corner
+        res = nelder_mead_in_box(f, x0, lo, hi, maxiter=800)
+        assert res.fun == pytest.approx(0.2 / 7, abs=1e-6)
+        np.testing.assert_allclose(np.clip(res.x, lo, hi), [6.6 / 7, 0.0], atol=1e-3)
+
+
 def test_the_selftest_kinds_survive_a_csv_round_trip():
     """``selftest.csv`` is read back by users with pandas' defaults, which turn the strings
     ``null``, ``NA``, ``None``... into NaN: a kind spelled that way would vanish from
