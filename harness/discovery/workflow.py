@@ -370,7 +370,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                      + f") fitted the residual best at step {ts['step']} (BIC {ts['bic']:.1f}; the residuals lean "
                      f"its way, p = {ts['p']:.2g}) but changes the model by {ts['net_change_mean_abs']:.3g} in mean "
                      f"|ln k|, under {min_change:.3g}: too small to name; {', '.join(ts['outranked'])} passed every "
-                     f"rule but fit worse and is not named in its place; the result is flagged unexplained")
+                     f"rule but {'fits' if len(ts['outranked']) == 1 else 'fit'} worse, and nothing is named in its "
+                     f"place; the result is flagged unexplained")
     if unsupported:
         stop += "; not named, for an interval that reaches no effect: " + ", ".join(
             u["effect"] + ("" if u["covers_null"] else f" (with {u['dropped_with']})") for u in unsupported)
