@@ -18,7 +18,7 @@ from ..data.dataset import Trial
 from ..execute.runner import run_trials
 from ..model.config import ModelConfig
 from ..model.effects import EffectSpec
-from .fit import Candidate, cross_validate
+from .fit import Candidate, CVResult, cross_validate
 from .screenset import PITCH_GRID_DEG, ScreenSet, predict_log_k
 from .shape import SHARE as SHAPE_SHARE, shape_check, shape_level, trace_shapes
 
@@ -164,12 +164,46 @@ def model_shape_check(engine: BaselineEngine, base_run: Any, specs: tuple[Effect
     return out
 
 
-def confirm(trials, backends, proto, cfg_b, model, F, ss, lka, lkb0, final, outp, executor,
-            progress, ss0=None) -> pd.DataFrame:
+@dataclass(frozen=True)
+class Anchored:
+    """A linear screen and the baseline engine's ln k it is anchored at: what a fit predicts from
+    (``predict_log_k(screen, log_k, specs)``), in the scored trials' order."""
+
+    screen: ScreenSet
+    log_k: np.ndarray
+
+
+def confirm(trials: list[Trial], backends: list[str], *, proto: Any, base_config: ModelConfig,
+            model: ModelConfig, F: pd.DataFrame, final: CVResult, anchor: Anchored, baseline: Anchored,
+            out: Path | None, executor: Any, progress: Any) -> pd.DataFrame:
     """Re-run the backends before and after; out-of-sample 'after' from the fold parameters.
 
-    ``lka`` is the baseline engine at the screen's anchor, ``lkb0`` its answer without effects.
+    Parameters
+    ----------
+    trials, backends
+        The dataset's trials (those in ``F`` are run) and the backends to confirm on.
+    proto, base_config, model
+        The probe protocol, the baseline model configuration ("before") and the fitted one ("after").
+    F
+        The scored trials (``trial``, ``cane``, ``k_field``), in the screens' order.
+    final
+        The cross-validated fit (``fit.specs`` and, per held-out cane, ``fold_specs``).
+    anchor
+        The screen at the last engine anchor: the fit's prediction, per fold and overall.
+    baseline
+        The screen from the baseline run, no effects: the linear screen's change without re-anchoring.
+    out
+        Where the runs' stores go (``out / "before"``, ``out / "after"``); nowhere when None.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per backend: median and worst |ln k_sim / k_field| before, after and after out of
+        sample, how far each engine's change is from the screen's, and the ok counts.
     """
+    cfg_b, outp = base_config, out
+    ss, lka = anchor.screen, anchor.log_k
+    ss0, lkb0 = baseline.screen, baseline.log_k
     keep = [t for t in trials if t.id in set(F.trial)]
     rb = run_trials(keep, backends, proto, cfg_b, outp / "before" if outp else None, executor=executor,
                     progress=progress).to_df()
@@ -185,7 +219,7 @@ def confirm(trials, backends, proto, cfg_b, model, F, ss, lka, lkb0, final, outp
     # the linear screen alone, from the baseline run (no re-anchoring): how far the engines' change is
     # from what the screen would have said (for the anchor engine the anchored figure is close to
     # 0 by construction; this one is not)
-    lin_change = (predict_log_k(ss0, lkb0, final.fit.specs) - lkb0) if ss0 is not None else full_change
+    lin_change = predict_log_k(ss0, lkb0, final.fit.specs) - lkb0
     lkf = np.log(F.k_field.to_numpy(float))
     rows = []
     for b in backends:

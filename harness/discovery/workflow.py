@@ -438,8 +438,10 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         t5 = time.perf_counter()
         # with the names withheld the engines run the library's best account: what it would do on
         # every engine is worth seeing; the named model's "after" is the "before"
-        engines = engine_runs.confirm(trials, backends or [base_backend], proto, cfg_b, partial_config or model, F,
-                                      ss, lka, lkb0, final, outp, executor, progress, ss0)
+        engines = engine_runs.confirm(trials, backends or [base_backend], proto=proto, base_config=cfg_b,
+                                      model=partial_config or model, F=F, final=final,
+                                      anchor=engine_runs.Anchored(ss, lka), baseline=engine_runs.Anchored(ss0, lkb0),
+                                      out=outp, executor=executor, progress=progress)
         timing["confirm_s"] = time.perf_counter() - t5
         gap["per_backend"] = {r.backend: {"model": "partial" if partial else "named", **{k: getattr(r, k) for k in (
             "before_median", "before_worst", "after_median", "after_worst", "after_cv_median", "after_cv_worst",
