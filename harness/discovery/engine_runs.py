@@ -201,13 +201,12 @@ def confirm(trials: list[Trial], backends: list[str], *, proto: Any, base_config
         One row per backend: median and worst |ln k_sim / k_field| before, after and after out of
         sample, how far each engine's change is from the screen's, and the ok counts.
     """
-    cfg_b, outp = base_config, out
     ss, lka = anchor.screen, anchor.log_k
     ss0, lkb0 = baseline.screen, baseline.log_k
     keep = [t for t in trials if t.id in set(F.trial)]
-    rb = run_trials(keep, backends, proto, cfg_b, outp / "before" if outp else None, executor=executor,
+    rb = run_trials(keep, backends, proto, base_config, out / "before" if out else None, executor=executor,
                     progress=progress).to_df()
-    ra = run_trials(keep, backends, proto, model, outp / "after" if outp else None, executor=executor,
+    ra = run_trials(keep, backends, proto, model, out / "after" if out else None, executor=executor,
                     progress=progress).to_df()
     # held-out change per trial: the fold's parameters on the screen, relative to the baseline
     fold_change = np.full(len(F), np.nan)

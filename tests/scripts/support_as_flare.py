@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from canebench.data.dataset import load_dataset
+from canebench.model.diameter import fit_diameter
 
 
 def moments(w: np.ndarray, s: np.ndarray) -> tuple[float, float, float]:
@@ -47,11 +48,11 @@ for cid, ts in sorted(canes.items()):
     cane = ts[0].cane
     hc = np.array([c.where.height if c.where.height is not None else c.where.s for c in cane.calipers])
     dc = np.array([c.diameter for c in cane.calipers])
-    line = np.polyfit(hc, dc, 1)
+    line = fit_diameter(hc, dc)  # the harness's caliper line
     E = cane.material.flexural_modulus
     h_low = 1e-3 * min(t.height_mm for t in ts)
     s = np.linspace(0.0, h_low, 4000)
-    d0 = np.polyval(line, s)
+    d0 = line(s)
     ei = E * np.pi * d0 ** 4 / 64
     w = np.zeros_like(s)
     if flare:
@@ -70,7 +71,7 @@ for cid, ts in sorted(canes.items()):
         length = float(np.sum(np.linalg.norm(np.diff(cane.polyline, axis=0), axis=1)))
         a = support["height_frac"] * length
         sa = top * a
-        eia = E * np.pi * np.polyval(line, sa) ** 4 / 64
+        eia = E * np.pi * line(sa) ** 4 / 64
         h0 = float(np.trapezoid(sa * (a - sa) / eia, sa) / np.trapezoid((a - sa) / eia, sa))
         line_out += f"; truth: support at {1e3 * a:.0f} mm, h0 {1e3 * h0:.0f} mm, lowest push {1e3 * h_low:.0f} mm"
     print(line_out)
