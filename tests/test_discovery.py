@@ -862,7 +862,7 @@ def test_the_fit_s_first_simplex_steps_every_parameter_across_its_range_even_fro
     (log 1) and a pitch at 0, and from there a scale + rig pair was fitted scale 1.000 (fit.py,
     SIMPLEX_STEP). Each vertex must move one parameter by a tenth of its search range, inward at
     a bound."""
-    from canebench.discovery.fit import Candidate
+    from canebench.discovery.fit import Candidate, first_simplex
     from canebench.model.effects import EFFECTS
 
     cand = Candidate.of(("modulus_scale", "rig_compliance", "probe_misalignment"))
@@ -871,7 +871,7 @@ def test_the_fit_s_first_simplex_steps_every_parameter_across_its_range_even_fro
         par = EFFECTS[n].parameters[p]
         ranges.append(math.log(par.high / par.low) if par.log else par.high - par.low)
     x0 = np.array([0.0, math.log(EFFECTS["rig_compliance"].parameters["k_rig"].high), 0.0])
-    sim = cand.simplex(x0)
+    sim = first_simplex(x0, *cand.box())
     assert sim.shape == (4, 3) and np.array_equal(sim[0], x0)
     steps = sim[1:] - x0
     np.testing.assert_allclose(np.abs(np.diag(steps)), 0.1 * np.array(ranges))
@@ -985,27 +985,28 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
     from types import SimpleNamespace
 
     from canebench.discovery.fit import Candidate, fit_candidate
-    from canebench.discovery.screenset import predict_log_k
+    from canebench.discovery.screenset import Anchored, predict_log_k
     from canebench.discovery.selection import MIN_CHANGE, backward, stalest
     from canebench.model.effects import EffectSpec
 
     ss, lkb, scatter, truth = _seed7_pair_screen()
+    at = Anchored(ss, lkb)
     names = ("modulus_scale", "rig_compliance", "root_compliance")
     calls = []
 
-    def reanchor(ss_, lkb_, cv_):
+    def reanchor(at_, cv_):
         calls.append(tuple(s.name for s in cv_.fit.specs))
-        return ss_, lkb_, cv_
+        return at_, cv_
 
     def run(hidden, protect):
         lkf = predict_log_k(ss, lkb, hidden) + scatter
         cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), ss, lkf, lkb))
         calls.clear()
         steps = []
-        out = backward(names, protect, cv, ss, lkf, lkb, MIN_CHANGE, reanchor, steps, 3)
+        out = backward(names, protect, cv, at, lkf, MIN_CHANGE, reanchor, steps, 3)
         return out, steps, lkf, cv
 
-    (current, cv, _, _, dropped), steps, lkf, _ = run(truth, ("root_compliance",))
+    (current, cv, _, dropped), steps, lkf, _ = run(truth, ("root_compliance",))
     assert current == ("modulus_scale", "root_compliance") and dropped == ["rig_compliance"]
     assert calls == [("modulus_scale", "root_compliance")] and [s.name for s in cv.fit.specs] == list(current)
     assert steps[0]["removed"] == "rig_compliance" and steps[0]["net_change_mean_abs"] < MIN_CHANGE
@@ -1020,7 +1021,7 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
     (current, *_), steps, lkf, cv0 = run(truth + (EffectSpec.parse("rig_compliance(k_rig=80)"),),
                                          ("root_compliance",))
     assert current == names and steps == [] and calls == []
-    nearest = stalest(names, ("modulus_scale", "rig_compliance"), cv0, ss, lkf, lkb)
+    nearest = stalest(names, ("modulus_scale", "rig_compliance"), cv0, at, lkf)
     assert nearest["net"] > 2 * MIN_CHANGE, nearest
 
 
@@ -1037,25 +1038,26 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
     from types import SimpleNamespace
 
     from canebench.discovery.fit import Candidate, fit_candidate
-    from canebench.discovery.screenset import predict_log_k
+    from canebench.discovery.screenset import Anchored, predict_log_k
     from canebench.discovery.selection import MIN_CHANGE, drop_unsupported, stalest
     from canebench.model.effects import EFFECTS
 
     ss, lkb, scatter, truth = _seed7_pair_screen()
+    at = Anchored(ss, lkb)
     lkf = predict_log_k(ss, lkb, truth) + scatter
-    empty = (ss.subset(np.ones(len(lkb), bool)), lkb.copy())  # stands for the pre-selection screen
+    empty = Anchored(ss.subset(np.ones(len(lkb), bool)), lkb.copy())  # stands for the pre-selection screen
     calls, drawn = [], []
     root_high = EFFECTS["root_compliance"].parameters["k_root"].high
 
-    def reanchor(ss_, lkb_, cv_):
+    def reanchor(at_, cv_):
         calls.append(tuple(s.name for s in cv_.fit.specs))
-        return ss_, lkb_, cv_
+        return at_, cv_
 
     def tight(fit):
         # an interval of +-10 % about every fitted value: excludes every null here
         return {(s.name, k): (0.9 * v, 1.1 * v) for s in fit.specs for k, v in s.params}
 
-    def draw_ci(fit, ss_, lkb_):
+    def draw_ci(fit, at_):
         drawn.append(tuple(s.name for s in fit.specs))
         return tight(fit)
 
@@ -1064,13 +1066,13 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
         ci = {**tight(cv.fit), **override}
         calls.clear(), drawn.clear()
         steps = []
-        out = drop_unsupported(names, entered, cv, ss, lkf, lkb, ci, draw_ci, reanchor, empty, MIN_CHANGE, steps)
+        out = drop_unsupported(names, entered, cv, at, lkf, ci, draw_ci, reanchor, empty, MIN_CHANGE, steps)
         return out, steps, cv
 
     # a spurious pitch, then the stale rig (fitted at its stiffest bound beside the pitch, so given
     # an interval below it here: it is the backward pass's to drop, not the interval's)
     names = ("modulus_scale", "rig_compliance", "root_compliance", "probe_misalignment")
-    (current, cv, _, _, ci, unsupported, stale), steps, _ = run(
+    (current, cv, _, ci, unsupported, stale), steps, _ = run(
         names, tuple((n,) for n in names), {("probe_misalignment", "angle_deg"): (-20.0, 5.0),
                                             ("rig_compliance", "k_rig"): (5e4, 9e4)})
     assert [u["effect"] for u in unsupported] == ["probe_misalignment"]
@@ -1083,28 +1085,28 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
     assert got["root_compliance"]["k_root"] == pytest.approx(131, rel=0.1), got
 
     # a pair's member reaches its null: its partner goes too, and the model is the empty one's
-    (current, cv, ss_out, lkb_out, ci, unsupported, stale), steps, _ = run(
+    (current, cv, at_out, ci, unsupported, stale), steps, _ = run(
         ("modulus_scale", "root_compliance"), (("modulus_scale", "root_compliance"),),
         {("root_compliance", "k_root"): (60.0, root_high)})
     assert current == () and ci == {} and stale == [] and calls == [] and drawn == []
-    assert ss_out is empty[0] and lkb_out is empty[1] and cv.fit.specs == ()
+    assert at_out is empty and cv.fit.specs == ()
     by = {u["effect"]: u for u in unsupported}
     assert by["root_compliance"]["covers_null"] == ["k_root"]
     assert by["modulus_scale"]["covers_null"] == [] and by["modulus_scale"]["dropped_with"] == "root_compliance"
     assert steps[0]["removed"] == "modulus_scale+root_compliance"
 
     # both reach their null in the marginal intervals: one goes, the other is tight alone and stays
-    (current, cv, _, _, ci, unsupported, stale), steps, cv0 = run(
+    (current, cv, _, ci, unsupported, stale), steps, cv0 = run(
         ("modulus_scale", "root_compliance"), (("modulus_scale",), ("root_compliance",)),
         {("root_compliance", "k_root"): (60.0, root_high), ("modulus_scale", "scale"): (0.95, 2.0)})
-    first = stalest(("modulus_scale", "root_compliance"), ("modulus_scale", "root_compliance"), cv0, ss, lkf,
-                     lkb)["name"]
+    first = stalest(("modulus_scale", "root_compliance"), ("modulus_scale", "root_compliance"), cv0, at,
+                    lkf)["name"]
     assert [u["effect"] for u in unsupported] == [first] and len(current) == 1 and first not in current
     assert calls == [current] and drawn == [current]
 
     # the group an effect last entered in decides its partner: a rig dropped as stale that came back
     # beside the root takes the root with it, not the scale it once stood beside
-    (current, cv, _, _, ci, unsupported, stale), steps, _ = run(
+    (current, cv, _, ci, unsupported, stale), steps, _ = run(
         names[:3], (("modulus_scale",), ("rig_compliance", "root_compliance")),
         {("rig_compliance", "k_rig"): (300.0, EFFECTS["rig_compliance"].parameters["k_rig"].high)})
     assert current == ("modulus_scale",) and stale == []
@@ -1116,11 +1118,11 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
     cv = SimpleNamespace(fit=fit_candidate(Candidate.of(("modulus_scale", "rig_compliance")), ss, lkf_null, lkb))
     ci = {**tight(cv.fit), ("modulus_scale", "scale"): (0.9, 1.1), ("rig_compliance", "k_rig"): (5e3, 9e4)}
     calls.clear(), drawn.clear()
-    current, cv, ss_out, lkb_out, ci, unsupported, stale = drop_unsupported(
-        ("modulus_scale", "rig_compliance"), (("modulus_scale",), ("rig_compliance",)), cv, ss, lkf_null, lkb, ci,
+    current, cv, at_out, ci, unsupported, stale = drop_unsupported(
+        ("modulus_scale", "rig_compliance"), (("modulus_scale",), ("rig_compliance",)), cv, at, lkf_null, ci,
         draw_ci, reanchor, empty, MIN_CHANGE, [])
     assert [u["effect"] for u in unsupported] == ["modulus_scale"] and stale == ["rig_compliance"]
-    assert current == () and ss_out is empty[0] and lkb_out is empty[1] and cv.fit.specs == ()
+    assert current == () and at_out is empty and cv.fit.specs == ()
     assert calls == [("rig_compliance",)] and drawn == [] and ci == {}
 
 
@@ -1363,7 +1365,7 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     0.01 (a fifth of the 0.05 materiality step; measured 0.0018 at most)."""
     from canebench.data.dataset import bundled_dataset, load_dataset
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
     from canebench.discovery.engine_runs import BaselineEngine, ok_log_k, pitch_table
     from canebench.discovery.workflow import BASELINES
     from canebench.execute.executors import SerialExecutor
@@ -1379,7 +1381,9 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     F = pd.DataFrame({"trial": [t.id for t in trials]})
     lkb = ok_log_k(run_trials(trials, [backend], proto, cfg0, None, executor=ex).to_df(), backend, F.trial)
     ss = ScreenSet.build([trial_geometry(t, cfg0) for t in trials])
-    ss_t, summary = pitch_table(BaselineEngine(trials, F, backend, proto, cfg0, (), None, ex, None), ss, lkb)
+    at_t, summary = pitch_table(BaselineEngine(trials, F, backend, proto, cfg0, (), None, ex, None), Anchored(ss, lkb))
+    ss_t = at_t.screen
+    assert at_t.log_k is lkb  # the table moves the screen, not its anchor
     assert summary["n_failed"] == 0
     for angle in (30.0, -30.0, 10.0):
         spec = EffectSpec("probe_misalignment", (("angle_deg", angle),))
@@ -1464,23 +1468,24 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     80 mm; 7 mm over 110 mm, measured in review): three pushes a cane do not tell a moderate
     weak zone from a fuller base, as docs/discovery.md states."""
     from canebench.discovery.fit import Candidate, cross_validate
-    from canebench.discovery.screenset import predict_log_k
+    from canebench.discovery.screenset import Anchored, predict_log_k
     from canebench.discovery.verdict import ADEQUACY_ALPHA, within_after, within_taken_by
     from canebench.discovery.workflow import SCREENED
 
     cfg, ss, lkb, canes, height, inv, rng, noise, scale = _scaled_bundled_screen(bundled_trials)
+    at = Anchored(ss, lkb)
     named = ("modulus_scale",)
     others = tuple(c for c in SCREENED if c not in named)
 
     def check(lkf):
-        return within_after(cross_validate(Candidate.of(named), ss, lkf, lkb), ss, lkb, canes, height, 1.0, 0)
+        return within_after(cross_validate(Candidate.of(named), ss, lkf, lkb), at, canes, height, 1.0, 0)
 
     # (A) power-law tapers through each cane's caliper line
     d0 = _power_law_diameters(bundled_trials, cfg, ss, inv, rng)
     taper = predict_log_k(ss.with_diameters(d0), lkb, scale) + noise
     w = check(taper)
     assert w["p"] < ADEQUACY_ALPHA, w  # the premise: the scale alone leaves the trend
-    taken, tried = within_taken_by(others, named, ss, taper, lkb, canes, height, 1.0, w["n_trials"], 0)
+    taken, tried = within_taken_by(others, named, at, taper, canes, height, 1.0, w["n_trials"], 0)
     assert taken is not None and taken["effect"] == "base_flare", tried
     assert taken["p"] >= ADEQUACY_ALPHA and taken["at_bound"] == ["excess_mm"] and len(tried) == len(others)
     # a spring at its stiffest adds nothing and cannot take anything
@@ -1492,7 +1497,7 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     canker = predict_log_k(ss, lkb, scale) + noise - np.array([0.0, 0.4, 1.1])[rank]
     w = check(canker)
     assert w["p"] < ADEQUACY_ALPHA, w
-    taken, tried = within_taken_by(others, named, ss, canker, lkb, canes, height, 1.0, w["n_trials"], 0)
+    taken, tried = within_taken_by(others, named, at, canker, canes, height, 1.0, w["n_trials"], 0)
     assert taken is None, tried
 
 
@@ -1511,14 +1516,14 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
     it did not, p = 0.10)."""
     from canebench.discovery.adequacy import within_dispersion
     from canebench.discovery.fit import Candidate, cross_validate
-    from canebench.discovery.screenset import predict_log_k
+    from canebench.discovery.screenset import Anchored, predict_log_k
     from canebench.discovery.verdict import WITHIN_EXCESS, WITHIN_FLOOR, within_after
 
     cfg, ss, lkb, canes, height, inv, rng, noise, scale = _scaled_bundled_screen(bundled_trials)
 
     def spread(lkf):
-        w = within_after(cross_validate(Candidate.of(("modulus_scale",)), ss, lkf, lkb), ss, lkb, canes, height,
-                         1.0, 0)
+        w = within_after(cross_validate(Candidate.of(("modulus_scale",)), ss, lkf, lkb), Anchored(ss, lkb), canes,
+                         height, 1.0, 0)
         return w, within_dispersion(w, WITHIN_EXCESS, WITHIN_FLOOR)
 
     # (A) power-law tapers through each cane's caliper line

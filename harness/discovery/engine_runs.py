@@ -19,7 +19,7 @@ from ..execute.runner import run_trials
 from ..model.config import ModelConfig
 from ..model.effects import EffectSpec
 from .fit import Candidate, CVResult, cross_validate
-from .screenset import PITCH_GRID_DEG, ScreenSet, predict_log_k
+from .screenset import PITCH_GRID_DEG, Anchored
 from .shape import SHARE as SHAPE_SHARE, shape_check, shape_level, trace_shapes
 
 
@@ -57,10 +57,11 @@ class BaselineEngine:
         return ok_log_k(self.run(specs, name).to_df(), self.backend, self.F.trial)
 
 
-def reanchor(engine: BaselineEngine, ss: ScreenSet, lka: np.ndarray, cv_cur: Any, lkf: np.ndarray,
-             log: list[dict[str, Any]], step: int, round_no: int, max_runs: int = 3,
-             xtol: float = 0.005) -> tuple[ScreenSet, np.ndarray, Any]:
+def reanchor(engine: BaselineEngine, at: Anchored, cv_cur: Any, lkf: np.ndarray, log: list[dict[str, Any]],
+             step: int, round_no: int, max_runs: int = 3, xtol: float = 0.005) -> tuple[Anchored, Any]:
     """Run the baseline engine with the current model and make it the screen's anchor; refit.
+
+    Returns the screen anchored there and the model cross-validated again on it.
 
     Repeated (at most ``max_runs`` engine runs) until the refit changes the predicted ln k of
     every trial by less than ``xtol``. A trial the engine fails on keeps the previous anchor's
@@ -72,7 +73,7 @@ def reanchor(engine: BaselineEngine, ss: ScreenSet, lka: np.ndarray, cv_cur: Any
     for it in range(1, max_runs + 1):
         specs = tuple(cv_cur.fit.specs)
         lk_eng = engine.log_k(specs, f"anchor_{round_no}_{it}")
-        lk_lin = predict_log_k(ss, lka, specs)
+        lk_lin = at.predict(specs)
         good = np.isfinite(lk_eng)
         dev = lk_eng - lk_lin
         new_lka = np.where(good, lk_eng, lk_lin)
@@ -86,21 +87,21 @@ def reanchor(engine: BaselineEngine, ss: ScreenSet, lka: np.ndarray, cv_cur: Any
             entry["kept_previous_anchor"] = True
             log.append(entry)
             break
-        ss, lka = ss.anchored(specs), new_lka
-        cv_cur = cross_validate(Candidate.of(tuple(sp.name for sp in specs)), ss, lkf, lka)
+        at = Anchored(at.screen.anchored(specs), new_lka)
+        cv_cur = cross_validate(Candidate.of(tuple(sp.name for sp in specs)), at.screen, lkf, at.log_k)
         # converged when the refit moves the predictions, not the parameters, by less than xtol
         # (a weakly identified parameter, e.g. a very stiff rig, can move far and change nothing)
-        move = float(np.max(np.abs(predict_log_k(ss, lka, cv_cur.fit.specs) - lka)))
+        move = float(np.max(np.abs(at.predict(cv_cur.fit.specs) - at.log_k)))
         entry["refit_move_ln_k"] = move
         log.append(entry)
         if move < xtol:
             break
-    return ss, lka, cv_cur
+    return at, cv_cur
 
 
-def pitch_table(engine: BaselineEngine, ss: ScreenSet, lkb: np.ndarray) -> tuple[ScreenSet, dict[str, Any]]:
+def pitch_table(engine: BaselineEngine, at: Anchored) -> tuple[Anchored, dict[str, Any]]:
     """Run the baseline engine at the extra probe pitches :data:`PITCH_GRID_DEG`; the screen with
-    each trial's engine-minus-screen ln k there (:meth:`ScreenSet.with_pitch_table`).
+    each trial's engine-minus-screen ln k there (:meth:`.ScreenSet.with_pitch_table`), at the same anchor.
 
     A pitched probe loads the cane along its axis as well (tension pitched up, compression
     down), which stiffens or softens it beyond the linear screen's 1/cos^2; without the table
@@ -113,7 +114,7 @@ def pitch_table(engine: BaselineEngine, ss: ScreenSet, lkb: np.ndarray) -> tuple
             continue
         spec = EffectSpec("probe_misalignment", (("angle_deg", float(pitch)),))
         lk_eng = engine.log_k((spec,), f"pitch_{pitch:+.0f}")
-        table[:, j] = lk_eng - predict_log_k(ss, lkb, (spec,))
+        table[:, j] = lk_eng - at.predict((spec,))
     failed = ~np.all(np.isfinite(table), axis=1)
     # None where the engine failed on every trial at a pitch: discovery.json is strict JSON
     summary = {"grid_deg": list(PITCH_GRID_DEG), "engine": engine.backend, "n_failed": int(failed.sum()),
@@ -121,7 +122,7 @@ def pitch_table(engine: BaselineEngine, ss: ScreenSet, lkb: np.ndarray) -> tuple
                                               else None for c in table.T],
                "max_abs_engine_minus_screen": [float(np.max(np.abs(c[np.isfinite(c)]))) if np.isfinite(c).any()
                                                else None for c in table.T]}
-    return ss.with_pitch_table(table), summary
+    return Anchored(at.screen.with_pitch_table(table), at.log_k), summary
 
 
 def model_shape_check(engine: BaselineEngine, base_run: Any, specs: tuple[EffectSpec, ...], seed: int,
@@ -164,15 +165,6 @@ def model_shape_check(engine: BaselineEngine, base_run: Any, specs: tuple[Effect
     return out
 
 
-@dataclass(frozen=True)
-class Anchored:
-    """A linear screen and the baseline engine's ln k it is anchored at: what a fit predicts from
-    (``predict_log_k(screen, log_k, specs)``), in the scored trials' order."""
-
-    screen: ScreenSet
-    log_k: np.ndarray
-
-
 def confirm(trials: list[Trial], backends: list[str], *, proto: Any, base_config: ModelConfig,
             model: ModelConfig, F: pd.DataFrame, final: CVResult, anchor: Anchored, baseline: Anchored,
             out: Path | None, executor: Any, progress: Any) -> pd.DataFrame:
@@ -201,8 +193,7 @@ def confirm(trials: list[Trial], backends: list[str], *, proto: Any, base_config
         One row per backend: median and worst |ln k_sim / k_field| before, after and after out of
         sample, how far each engine's change is from the screen's, and the ok counts.
     """
-    ss, lka = anchor.screen, anchor.log_k
-    ss0, lkb0 = baseline.screen, baseline.log_k
+    lkb0 = baseline.log_k
     keep = [t for t in trials if t.id in set(F.trial)]
     rb = run_trials(keep, backends, proto, base_config, out / "before" if out else None, executor=executor,
                     progress=progress).to_df()
@@ -212,13 +203,12 @@ def confirm(trials: list[Trial], backends: list[str], *, proto: Any, base_config
     fold_change = np.full(len(F), np.nan)
     for cane, specs in final.fold_specs.items():
         m = (F.cane == cane).to_numpy()
-        sub = ss.subset(m)
-        fold_change[m] = predict_log_k(sub, lka[m], specs) - lkb0[m]
-    full_change = predict_log_k(ss, lka, final.fit.specs) - lkb0
+        fold_change[m] = anchor.subset(m).predict(specs) - lkb0[m]
+    full_change = anchor.predict(final.fit.specs) - lkb0
     # the linear screen alone, from the baseline run (no re-anchoring): how far the engines' change is
     # from what the screen would have said (for the anchor engine the anchored figure is close to
     # 0 by construction; this one is not)
-    lin_change = predict_log_k(ss0, lkb0, final.fit.specs) - lkb0
+    lin_change = baseline.predict(final.fit.specs) - lkb0
     lkf = np.log(F.k_field.to_numpy(float))
     rows = []
     for b in backends:

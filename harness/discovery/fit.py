@@ -73,14 +73,19 @@ def nelder_mead_in_box(obj: Callable[[np.ndarray], float], x0: np.ndarray, lo: n
     20 mm length; BIC -67.0), where a restart finds 50.9 N/m, 25 mm and 84 mm (BIC -99.0), and
     a scale + rig pair that fits worse (-86.4) was named in its place.
     """
-    opts = {"xatol": 1e-4, "fatol": 1e-6, "maxiter": maxiter}
-    res = minimize(obj, x0, method="Nelder-Mead", options={**opts, "initial_simplex": first_simplex(x0, lo, hi)})
+    fatol = 1e-6
+
+    def run(x: np.ndarray) -> Any:
+        return minimize(obj, x, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": fatol, "maxiter": maxiter,
+                                                               "initial_simplex": first_simplex(x, lo, hi)})
+
+    res = run(x0)
     for _ in range(BOX_RESTARTS):
         x = np.clip(res.x, lo, hi)
         if not np.any((x <= lo) | (x >= hi)):
             break
-        again = minimize(obj, x, method="Nelder-Mead", options={**opts, "initial_simplex": first_simplex(x, lo, hi)})
-        if not again.fun < res.fun - opts["fatol"]:
+        again = run(x)
+        if not again.fun < res.fun - fatol:
             break
         res = again
     return res
@@ -119,10 +124,6 @@ class Candidate:
         """The free parameters' search bounds in the optimizer's coordinates: (low, high)."""
         b = np.array([_bounds(EFFECTS[n].parameters[p]) for n, p in self.free], float).reshape(-1, 2)
         return b[:, 0], b[:, 1]
-
-    def simplex(self, x0: np.ndarray, share: float = SIMPLEX_STEP) -> np.ndarray:
-        """Nelder-Mead's first simplex about ``x0`` (:func:`first_simplex` in :meth:`box`)."""
-        return first_simplex(x0, *self.box(), share=share)
 
     def grid(self, n_per: int = 7) -> list[np.ndarray]:
         axes = []

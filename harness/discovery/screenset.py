@@ -248,6 +248,24 @@ class ScreenSet:
 M_PER_N_TO_MM_PER_N = 1e3
 
 
+@dataclass(frozen=True)
+class Anchored:
+    """A linear screen and the baseline engine's ln k it is anchored at, in the scored trials'
+    order: what every fit predicts from, and what moves together when the screen is re-anchored
+    (:func:`.engine_runs.reanchor`)."""
+
+    screen: ScreenSet
+    log_k: np.ndarray
+
+    def predict(self, specs: tuple[EffectSpec, ...]) -> np.ndarray:
+        """ln k of every trial with the effects ``specs`` (:func:`predict_log_k`)."""
+        return predict_log_k(self.screen, self.log_k, specs)
+
+    def subset(self, keep: np.ndarray) -> "Anchored":
+        """The trials where ``keep`` is true (:meth:`ScreenSet.subset`)."""
+        return Anchored(self.screen.subset(keep), self.log_k[keep])
+
+
 def predict_log_k(ss: ScreenSet, log_k_base: np.ndarray, specs: tuple[EffectSpec, ...]) -> np.ndarray:
     """ln k_pred per trial (k in N/mm) under the effects ``specs``.
 

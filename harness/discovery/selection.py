@@ -20,7 +20,7 @@ import numpy as np
 from ..model.effects import EffectSpec
 from .fit import Candidate, cross_validate, direction_test_p, fit_candidate, sign_flip_p
 from .nulls import Intervals, ci_of, covers_null
-from .screenset import ScreenSet, predict_log_k
+from .screenset import Anchored
 
 ALPHA = 0.05  # family-wise per step: halves for the singles (Bonferroni) and the pair test
 MIN_REDUCTION = 0.05  # held-out mean |log ratio| per cane must fall by at least this fraction
@@ -44,8 +44,7 @@ class Selection:
 
     current: tuple[str, ...]  # the effects in the model
     cv: Any  # the model cross-validated (:func:`.fit.cross_validate`)
-    ss: ScreenSet  # the screen, anchored on the engine's run of the model
-    lkb: np.ndarray  # that run's ln k (the anchor)
+    at: Anchored  # the screen, anchored on the engine's run of the model
     steps: list[dict[str, Any]]  # one row per candidate tried and per effect dropped
     entered: list[tuple[str, ...]]  # the effects as they entered the model (a pair together)
     removed: list[str]  # named, then found stale by the backward pass
@@ -56,7 +55,7 @@ class Selection:
     too_small: dict[str, Any] | None = None
 
 
-def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, lkb: np.ndarray,
+def forward_select(candidates: tuple[str, ...], at: Anchored, lkf: np.ndarray,
                    reanchor: Callable[..., Any], alpha: float = ALPHA, max_effects: int = 3,
                    min_change: float = MIN_CHANGE, seed: int = 0) -> Selection:
     """Add effects while one (or a pair) passes every naming rule; see :mod:`.workflow`, step 4.
@@ -65,8 +64,9 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
     materiality rule fits better (a lower BIC) than every single that passes and no pair passes
     (:attr:`Selection.too_small`; the caller flags the result unexplained).
 
-    ``reanchor(ss, lkb, cv)`` runs the baseline engine with the model ``cv`` holds and returns
-    the screen anchored there, the engine's ln k and the model cross-validated again.
+    ``at`` is the screen and its anchor (the baseline's); ``lkf`` the field's ln k.
+    ``reanchor(at, cv)`` runs the baseline engine with the model ``cv`` holds and returns the
+    screen anchored there (:class:`.screenset.Anchored`) and the model cross-validated again.
     """
     current: tuple[str, ...] = ()
     removed: list[str] = []  # named, then found stale by the backward pass
@@ -74,7 +74,7 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
     # models the search has held: a forward step may not return to one, so an effect dropped as
     # stale can re-enter only beside a new partner, and the search terminates
     visited: set[frozenset[str]] = {frozenset()}
-    cv_cur = cross_validate(Candidate.of(()), ss, lkf, lkb)
+    cv_cur = cross_validate(Candidate.of(()), at.screen, lkf, at.log_k)
     steps: list[dict[str, Any]] = []
     stop = ""
     too_small: dict[str, Any] | None = None
@@ -86,14 +86,14 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
         ``test``: what the score test runs over (default ``add``'s own directions); ``full``: the
         all-canes fit when it is already at hand.
         """
-        cv = cross_validate(Candidate.of(current + add), ss, lkf, lkb, full=full)
+        cv = cross_validate(Candidate.of(current + add), at.screen, lkf, at.log_k, full=full)
         # per held-out cane: mean |ln k_field/k_pred| before minus after (robust: one bad
         # trace cannot sink a cane, as it would under the Gaussian density)
-        diff = l1_cur - _l1_by_cane(cv.residual, ss.canes)
+        diff = l1_cur - _l1_by_cane(cv.residual, at.screen.canes)
         # significance: do the current residuals lean the way the effect moves them, cane by cane?
-        p = direction_test_p(test if test is not None else (add if len(add) > 1 else add[0]), ss, lkf, lkb,
-                             cv_cur.fit.specs, cv_cur.fit.s2, cv_cur.fit.t2, seed=seed)
-        net = _net_change(ss, lkb, cv.fit.specs, cv_cur.fit.specs)
+        p = direction_test_p(test if test is not None else (add if len(add) > 1 else add[0]), at.screen, lkf,
+                             at.log_k, cv_cur.fit.specs, cv_cur.fit.s2, cv_cur.fit.t2, seed=seed)
+        net = _net_change(at, cv.fit.specs, cv_cur.fit.specs)
         gain = float(diff.mean())
         med = float(np.median(np.abs(cv.residual)))
         # named only if: significant; BIC agrees; the held-out mean |ln| per cane falls by
@@ -121,7 +121,7 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
                                                           if removed else ""))
                     if not remaining else f"at most {max_effects} effects")
             break
-        l1_cur = _l1_by_cane(cv_cur.residual, ss.canes)
+        l1_cur = _l1_by_cane(cv_cur.residual, at.screen.canes)
         # the step's family-wise alpha: split in halves between the single effects and the pair
         # test when a pair can still be added, then Bonferroni within each half
         # (a pair may hold an effect dropped as stale beside a new partner)
@@ -153,12 +153,12 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
             # is tried at level alpha / 2 whenever it beats every single effect's BIC; its score
             # test is the max over every pair's joint directions (one test, whichever pair the
             # BIC picked)
-            fits = [fit_candidate(Candidate.of(current + pr), ss, lkf, lkb) for pr in pairs]
+            fits = [fit_candidate(Candidate.of(current + pr), at.screen, lkf, at.log_k) for pr in pairs]
             i = int(np.argmin([f.bic for f in fits]))
             best_pair = pairs[i]
             if fits[i].bic < min(t["cv"].fit.bic for t in tried):
                 tp = evaluate(best_pair, 0.5 * alpha, l1_cur, test=pairs, full=fits[i])
-                _judge_pair(tp, best_pair, tried, ok, current, ss, lkf, lkb, min_change)
+                _judge_pair(tp, best_pair, tried, ok, current, at, lkf, min_change)
                 tried.append(tp)
                 if tp["passed"]:
                     ok.append(tp)
@@ -192,9 +192,9 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
             visited.add(frozenset(current))
             entered.append(best["add"])
             cv_cur = best["cv"]
-            ss, lkb, cv_cur = reanchor(ss, lkb, cv_cur)
-            current, cv_cur, ss, lkb, dropped = backward(current, best["add"], cv_cur, ss, lkf, lkb, min_change,
-                                                         reanchor, steps, len(current))
+            at, cv_cur = reanchor(at, cv_cur)
+            current, cv_cur, at, dropped = backward(current, best["add"], cv_cur, at, lkf, min_change, reanchor,
+                                                    steps, len(current))
             removed.extend(dropped)
             entered = _prune(entered, tuple(dropped))
             continue
@@ -205,11 +205,11 @@ def forward_select(candidates: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, 
                 f"{'; BIC does not improve' if best['cv'].fit.bic >= cv_cur.fit.bic else ''})"
                 + (f"; dropped as stale on the way: {', '.join(removed)}" if removed else ""))
         break
-    return Selection(current, cv_cur, ss, lkb, steps, entered, removed, stop, too_small)
+    return Selection(current, cv_cur, at, steps, entered, removed, stop, too_small)
 
 
 def _judge_pair(tp: dict[str, Any], pair: tuple[str, str], tried: list[dict[str, Any]], ok: list[dict[str, Any]],
-                current: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray, lkb: np.ndarray, min_change: float) -> None:
+                current: tuple[str, ...], at: Anchored, lkf: np.ndarray, min_change: float) -> None:
     """The rules a pair that passed its own tests must also meet; fails ``tp`` in place where not.
 
     No passenger: each member must matter beside the other alone (a lower BIC and a material
@@ -225,15 +225,16 @@ def _judge_pair(tp: dict[str, Any], pair: tuple[str, str], tried: list[dict[str,
     if ok and not tp["cv"].fit.bic < min(t["cv"].fit.bic for t in ok) - PAIR_OVER_SINGLE_BIC:
         tp["passed"] = False
         tp["row"]["refused"] = f"BIC not {PAIR_OVER_SINGLE_BIC:g} below the passing single's"
-    l1_pair = _l1_by_cane(tp["cv"].residual, ss.canes)
+    l1_pair = _l1_by_cane(tp["cv"].residual, at.screen.canes)
     for m in pair:
         o = next(n for n in pair if n != m)
         # (a member dropped as stale earlier is no single candidate now: fitted here)
-        other = single[o]["cv"] if o in single else cross_validate(Candidate.of(current + (o,)), ss, lkf, lkb)
+        other = (single[o]["cv"] if o in single
+                 else cross_validate(Candidate.of(current + (o,)), at.screen, lkf, at.log_k))
         ok_m = (tp["cv"].fit.bic < other.fit.bic
-                and _net_change(ss, lkb, tp["cv"].fit.specs, other.fit.specs) >= min_change)
+                and _net_change(at, tp["cv"].fit.specs, other.fit.specs) >= min_change)
         if ok and ok_m:
-            l1_o = _l1_by_cane(other.residual, ss.canes)
+            l1_o = _l1_by_cane(other.residual, at.screen.canes)
             gain_m = float((l1_o - l1_pair).mean())
             tp["row"].setdefault("gain_beside_other", {})[m] = gain_m
             ok_m = gain_m > MIN_REDUCTION * float(l1_o.mean())
@@ -242,35 +243,34 @@ def _judge_pair(tp: dict[str, Any], pair: tuple[str, str], tried: list[dict[str,
             tp["row"].setdefault("passenger", []).append(m)
 
 
-def _net_change(ss: ScreenSet, lk_anchor: np.ndarray, specs: tuple[EffectSpec, ...],
-                current: tuple[EffectSpec, ...]) -> float:
+def _net_change(at: Anchored, specs: tuple[EffectSpec, ...], current: tuple[EffectSpec, ...]) -> float:
     """Mean |change in ln k| from the current fitted model to the candidate's (both refitted)."""
-    d = np.abs(predict_log_k(ss, lk_anchor, specs) - predict_log_k(ss, lk_anchor, current))
+    d = np.abs(at.predict(specs) - at.predict(current))
     return float(np.mean(d[np.isfinite(d)])) if np.isfinite(d).any() else 0.0
 
 
-def stalest(current: tuple[str, ...], eligible: tuple[str, ...], cv_cur: Any, ss: ScreenSet, lkf: np.ndarray,
-            lkb: np.ndarray) -> dict[str, Any]:
+def stalest(current: tuple[str, ...], eligible: tuple[str, ...], cv_cur: Any, at: Anchored,
+            lkf: np.ndarray) -> dict[str, Any]:
     """The effect in ``eligible`` whose removal from ``current`` (the others refitted) changes the model least."""
     best: dict[str, Any] = {}
     for name in eligible:
-        fit = fit_candidate(Candidate.of(tuple(c for c in current if c != name)), ss, lkf, lkb)
-        net = _net_change(ss, lkb, fit.specs, cv_cur.fit.specs)
+        fit = fit_candidate(Candidate.of(tuple(c for c in current if c != name)), at.screen, lkf, at.log_k)
+        net = _net_change(at, fit.specs, cv_cur.fit.specs)
         if not best or net < best["net"]:
             best = {"name": name, "net": net, "fit": fit}
     return best
 
 
-def backward(current: tuple[str, ...], protect: tuple[str, ...], cv_cur: Any, ss: ScreenSet, lkf: np.ndarray,
-             lkb: np.ndarray, min_change: float, reanchor: Any, steps: list[dict[str, Any]],
-             step: int) -> tuple[tuple[str, ...], Any, ScreenSet, np.ndarray, list[str]]:
-    """Drop the named effects that have gone stale; return (current, cv_cur, ss, lkb, dropped).
+def backward(current: tuple[str, ...], protect: tuple[str, ...], cv_cur: Any, at: Anchored, lkf: np.ndarray,
+             min_change: float, reanchor: Any, steps: list[dict[str, Any]],
+             step: int) -> tuple[tuple[str, ...], Any, Anchored, list[str]]:
+    """Drop the named effects that have gone stale; return (current, cv_cur, at, dropped).
 
     An effect named early can go stale once a later one explains its share (a stiff rig named
     before the soft root that explains the same stiff canes refits to a rig so stiff it changes
     nothing). While the stalest effect's removal, the others refitted, changes the model by less
     than ``min_change`` (the materiality rule that named it), it is dropped, the rest
-    cross-validated and ``reanchor(ss, lkb, cv_cur)`` run. The effects just added (``protect``)
+    cross-validated and ``reanchor(at, cv_cur)`` run. The effects just added (``protect``)
     are not candidates: they passed that rule against this very model, and a pair member
     dropped at once would leave its partner, which failed alone, in the model untested.
     """
@@ -279,7 +279,7 @@ def backward(current: tuple[str, ...], protect: tuple[str, ...], cv_cur: Any, ss
         eligible = tuple(c for c in current if c not in protect)
         if not eligible:
             break
-        drop = stalest(current, eligible, cv_cur, ss, lkf, lkb)
+        drop = stalest(current, eligible, cv_cur, at, lkf)
         if drop["net"] >= min_change:
             break
         current = tuple(c for c in current if c != drop["name"])
@@ -288,14 +288,13 @@ def backward(current: tuple[str, ...], protect: tuple[str, ...], cv_cur: Any, ss
                       "params": {s.name: dict(s.params) for s in drop["fit"].specs}, "chosen": True,
                       "removed": drop["name"]})
         dropped.append(drop["name"])
-        cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb, full=drop["fit"])  # that fit is at hand
-        ss, lkb, cv_cur = reanchor(ss, lkb, cv_cur)
-    return current, cv_cur, ss, lkb, dropped
+        cv_cur = cross_validate(Candidate.of(current), at.screen, lkf, at.log_k, full=drop["fit"])  # at hand
+        at, cv_cur = reanchor(at, cv_cur)
+    return current, cv_cur, at, dropped
 
 
-def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], ...], cv_cur: Any, ss: ScreenSet,
-                     lkf: np.ndarray, lkb: np.ndarray, ci: Intervals, draw_ci: Any, reanchor: Any,
-                     empty: tuple[ScreenSet, np.ndarray], min_change: float,
+def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], ...], cv_cur: Any, at: Anchored,
+                     lkf: np.ndarray, ci: Intervals, draw_ci: Any, reanchor: Any, empty: Anchored, min_change: float,
                      steps: list[dict[str, Any]]) -> tuple[Any, ...]:
     """Take out of the model, one at a time, the effects whose 95 % interval reaches no effect.
 
@@ -313,7 +312,7 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
 
     Returns
     -------
-    (current, cv_cur, ss, lkb, ci, unsupported, stale)
+    (current, cv_cur, at, ci, unsupported, stale)
         ``unsupported``: one dict per dropped effect (``effect``, ``params``, ``ci95``,
         ``covers_null``: the parameters whose interval reaches no effect, possibly none for a pair
         partner, whose ``dropped_with`` names the effect it entered beside); ``stale``: the
@@ -327,17 +326,17 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
     groups = list(entered)
 
     def at_empty():
-        return empty[0], empty[1], cross_validate(Candidate.of(()), empty[0], lkf, empty[1])
+        return empty, cross_validate(Candidate.of(()), empty.screen, lkf, empty.log_k)
 
-    def anchor(ss_, lkb_, cv_):
+    def anchor(at_, cv_):
         # the backward pass may empty the model too: then the empty model's screen, as handed in
-        return at_empty() if not cv_.fit.specs else reanchor(ss_, lkb_, cv_)
+        return at_empty() if not cv_.fit.specs else reanchor(at_, cv_)
 
     while current:
         idle = {s.name: cov for s in cv_cur.fit.specs if (cov := covers_null(s, ci))}
         if not idle:
             break
-        least = stalest(current, tuple(idle), cv_cur, ss, lkf, lkb) if len(idle) > 1 else {}
+        least = stalest(current, tuple(idle), cv_cur, at, lkf) if len(idle) > 1 else {}
         name = least.get("name", next(iter(idle)))
         group = next((g for g in reversed(groups) if name in g), (name,))
         gone = tuple(c for c in current if c in group)
@@ -352,10 +351,10 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
         groups = _prune(groups, gone)
         if current:
             # the stalest search already fitted the model without ``name`` alone
-            cv_cur = cross_validate(Candidate.of(current), ss, lkf, lkb,
+            cv_cur = cross_validate(Candidate.of(current), at.screen, lkf, at.log_k,
                                     full=least.get("fit") if gone == (name,) else None)
         else:
-            ss, lkb, cv_cur = at_empty()
+            at, cv_cur = at_empty()
         steps.append({"step": size, "model": "+".join(current), "candidate": "".join(f"-{c}" for c in gone),
                       "bic": cv_cur.fit.bic, "params": {sp.name: dict(sp.params) for sp in cv_cur.fit.specs},
                       "chosen": True, "removed": "+".join(gone),
@@ -363,13 +362,13 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
                              + (f"; {', '.join(c for c in gone if c != name)} entered beside it" if len(gone) > 1
                                 else "")})
         if current:
-            ss, lkb, cv_cur = anchor(ss, lkb, cv_cur)
-            current, cv_cur, ss, lkb, dropped = backward(current, (), cv_cur, ss, lkf, lkb, min_change, anchor,
-                                                         steps, len(current))
+            at, cv_cur = anchor(at, cv_cur)
+            current, cv_cur, at, dropped = backward(current, (), cv_cur, at, lkf, min_change, anchor, steps,
+                                                    len(current))
             stale.extend(dropped)
             groups = _prune(groups, tuple(dropped))
-        ci = draw_ci(cv_cur.fit, ss, lkb) if current else {}
-    return current, cv_cur, ss, lkb, ci, unsupported, stale
+        ci = draw_ci(cv_cur.fit, at) if current else {}
+    return current, cv_cur, at, ci, unsupported, stale
 
 
 def _prune(groups: Any, names: tuple[str, ...]) -> list[tuple[str, ...]]:

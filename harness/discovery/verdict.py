@@ -21,7 +21,7 @@ from .adequacy import geometry_draws, level_trend_geometry, within_dispersion, w
 from .checks_text import failure_reasons
 from .fit import Candidate, cross_validate
 from .nulls import at_bound, null_bound
-from .screenset import ScreenSet
+from .screenset import Anchored
 from .structure import level_trend, structure_tests
 
 STRUCTURE_ALPHA = 0.01  # Bonferroni-adjusted p below which residual structure counts as unexplained
@@ -70,16 +70,16 @@ class Verdict:
     partial: list[dict[str, Any]] = field(default_factory=list)  # global names withheld
 
 
-def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.ndarray, ss0: ScreenSet,
-          lkb0: np.ndarray, ss: ScreenSet, lkb: np.ndarray, final: Any, current: tuple[str, ...],
+def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.ndarray, baseline: Anchored,
+          anchor: Anchored, final: Any, current: tuple[str, ...],
           candidates: tuple[str, ...], unsupported: list[dict[str, Any]], named: list[dict[str, Any]],
           diameter_factor: float, shape_of: Callable[[tuple, float], dict[str, Any]], notes: list[str],
           timing: dict[str, float], seed: int = 0) -> Verdict:
     """Run the checks on the selection's model (``final``, cross-validated; ``current`` its effects).
 
     ``F`` holds the scored trials (``cane``, ``height_m``, the residuals and ``log_k_model_cv``);
-    ``r_before``/``r_after`` are the baseline's and the model's held-out residuals; ``ss0, lkb0``
-    the screen and ln k of the baseline, ``ss, lkb`` of the last anchor. ``shape_of(specs, alpha)``
+    ``r_before``/``r_after`` are the baseline's and the model's held-out residuals; ``baseline``
+    the screen at the baseline's ln k, ``anchor`` at the last anchor (:class:`.screenset.Anchored`). ``shape_of(specs, alpha)``
     runs the traces' shape check of a model on the engine at level ``alpha``
     (:func:`.engine_runs.model_shape_check`).
     Notes are appended to ``notes``, durations to ``timing``.
@@ -93,12 +93,12 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     # one trend, and its stiffness-level feature is the field's, which contains the residual itself.
     # The null carries the caliper line's error, which level and residual share (.adequacy).
     canes_f = F.cane.to_numpy()
-    g_before = geometry_draws(ss0, lkb0, (), diameter_factor, seed=seed)
-    g_after = geometry_draws(ss, lkb, tuple(final.fit.specs), diameter_factor, seed=seed)
+    g_before = geometry_draws(baseline.screen, baseline.log_k, (), diameter_factor, seed=seed)
+    g_after = geometry_draws(anchor.screen, anchor.log_k, tuple(final.fit.specs), diameter_factor, seed=seed)
     adequacy = {"test": "between-cane correlation of the held-out residual with the model's ln k, against "
                         "the caliper-fit geometry's shared error (parametric bootstrap, two-sided)",
                 "alpha": ADEQUACY_ALPHA,
-                "before": level_trend_geometry(canes_f, r_before, lkb0, g_before, seed=seed),
+                "before": level_trend_geometry(canes_f, r_before, baseline.log_k, g_before, seed=seed),
                 "after_cv": level_trend_geometry(canes_f, r_after, F.log_k_model_cv.to_numpy(float), g_after,
                                                  seed=seed)}
     trend_fails = bool(adequacy["after_cv"]["p"] < ADEQUACY_ALPHA)
@@ -137,7 +137,7 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
         refused = {u["effect"] for u in unsupported}
         taken, tried = within_taken_by(tuple(c for c in candidates if c not in current and c != "obstruction"
                                              and c not in refused),
-                                       current, ss, lkf, lkb, canes_f, height, diameter_factor,
+                                       current, anchor, lkf, canes_f, height, diameter_factor,
                                        adequacy["within_after_cv"]["n_trials"], seed)
         adequacy["within_taken_by"], adequacy["within_tried"] = taken, tried
         timing["within_taken_s"] = time.perf_counter() - t_w
@@ -185,16 +185,16 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     return Verdict(sb, sa, adequacy, unexplained, named, partial)
 
 
-def within_after(cv: Any, ss: ScreenSet, lkb: np.ndarray, canes: np.ndarray, height: np.ndarray, factor: float,
+def within_after(cv: Any, at: Anchored, canes: np.ndarray, height: np.ndarray, factor: float,
                  seed: int) -> dict[str, Any]:
     """The within-cane check of a cross-validated model: its held-out residual against push height,
     with the model's own geometry draws in the null (as ``adequacy.within_after_cv``)."""
-    g = geometry_draws(ss, lkb, tuple(cv.fit.specs), factor, seed=seed)
+    g = geometry_draws(at.screen, at.log_k, tuple(cv.fit.specs), factor, seed=seed)
     return within_trend_geometry(canes, cv.residual, height, g, seed=seed)
 
 
-def within_taken_by(others: tuple[str, ...], current: tuple[str, ...], ss: ScreenSet, lkf: np.ndarray,
-                    lkb: np.ndarray, canes: np.ndarray, height: np.ndarray, factor: float, n_trials: int,
+def within_taken_by(others: tuple[str, ...], current: tuple[str, ...], at: Anchored, lkf: np.ndarray,
+                    canes: np.ndarray, height: np.ndarray, factor: float, n_trials: int,
                     seed: int) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
     """The unnamed library effect that, added to ``current``, leaves no trend along the canes.
 
@@ -221,7 +221,7 @@ def within_taken_by(others: tuple[str, ...], current: tuple[str, ...], ss: Scree
     best: dict[str, Any] | None = None
     tried: list[dict[str, Any]] = []
     for c in others:
-        cv = cross_validate(Candidate.of(current + (c,)), ss, lkf, lkb)
+        cv = cross_validate(Candidate.of(current + (c,)), at.screen, lkf, at.log_k)
         spec = next(s for s in cv.fit.specs if s.name == c)
         row: dict[str, Any] = {"effect": c, "params": dict(spec.params), "r": math.nan, "p": math.nan}
         par = EFFECTS[c].parameters
@@ -230,7 +230,7 @@ def within_taken_by(others: tuple[str, ...], current: tuple[str, ...], ss: Scree
         if idle:
             row["why_not"] = f"does nothing: {', '.join(idle)} at its bound beside the null"
         else:
-            w = within_after(cv, ss, lkb, canes, height, factor, seed)
+            w = within_after(cv, at, canes, height, factor, seed)
             row.update(r=w["r"], p=w["p"])
             if w["n_trials"] != n_trials or not np.isfinite(w["r"]):
                 row["why_not"] = f"scored {w['n_trials']} trials of {n_trials}"

@@ -102,7 +102,7 @@ from .fit import bootstrap_ci
 from .nulls import ci_of
 from .onsets import detect_early_contact, detect_onset
 from .screen import trial_geometry
-from .screenset import ScreenSet, predict_log_k
+from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, MIN_CHANGE, drop_unsupported, forward_select
 from .structure import between_share
 from .verdict import INADEQUATE, judge
@@ -309,46 +309,46 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     F = feats[usable].reset_index(drop=True)
     ss = ScreenSet.build([geoms[t] for t in F.trial])
     lkf = np.log(F.k_field.to_numpy(float))
-    lkb = np.log(F.k_base.to_numpy(float))
+    lkb0 = np.log(F.k_base.to_numpy(float))
     timing["screen_build_s"] = time.perf_counter() - t2
     notes.append(f"calipers: readings scatter {1e3 * ss.cal_sigma:.2f} mm about each cane's fitted line (pooled); "
                  f"a diameter effect's change at the calipers is scored against it, so a flare stays below them")
-    # the baseline engine's answer (the "before") and the linear screen alone; lkb, ss follow the
-    # anchor, and ss carries the pitch table
-    lkb0, ss0 = lkb, ss
+    # the baseline engine's answer (the "before") and the linear screen alone; ``at`` follows the
+    # anchor, and its screen carries the pitch table
+    at0 = at = Anchored(ss, lkb0)
     pitch_table: dict[str, Any] = {}
     engine = engine_runs.BaselineEngine(trials, F, base_backend, proto, cfg0, obstruction, outp, executor, progress)
     if "probe_misalignment" in candidates:
         t_p = time.perf_counter()
-        ss, pitch_table = engine_runs.pitch_table(engine, ss, lkb)
+        at, pitch_table = engine_runs.pitch_table(engine, at)
         timing["pitch_table_s"] = time.perf_counter() - t_p
         if pitch_table["n_failed"]:
             notes.append(f"pitch table: the engine failed on {pitch_table['n_failed']} trial(s) at some pitch; "
                          "those trials' pitch is screened linearly (1/cos^2 only)")
-    ss_sel, lkb_sel = ss, lkb  # the empty model's screen and anchor
+    at_empty = at  # the empty model's screen and anchor
 
     # -- selection
     t3 = time.perf_counter()
     anchors: list[dict[str, Any]] = []
 
-    def reanchor(ss_, lkb_, cv_):
+    def reanchor(at_, cv_):
         # each engine re-anchoring round gets its own folder: a drop can return to an earlier size
-        return engine_runs.reanchor(engine, ss_, lkb_, cv_, lkf, anchors, len(cv_.fit.specs),
+        return engine_runs.reanchor(engine, at_, cv_, lkf, anchors, len(cv_.fit.specs),
                                     len({a["round"] for a in anchors}) + 1)
 
-    sel = forward_select(candidates, ss, lkf, lkb, reanchor, alpha, max_effects, min_change, seed)
-    current, cv_cur, ss, lkb, steps, stop = sel.current, sel.cv, sel.ss, sel.lkb, sel.steps, sel.stop
+    sel = forward_select(candidates, at, lkf, reanchor, alpha, max_effects, min_change, seed)
+    current, cv_cur, at, steps, stop = sel.current, sel.cv, sel.at, sel.steps, sel.stop
     timing["selection_s"] = time.perf_counter() - t3
 
     # -- intervals, and the names they do not support
     t4 = time.perf_counter()
 
-    def draw_ci(fit_, ss_, lkb_):
-        return bootstrap_ci(fit_, ss_, lkf, lkb_, n_boot=n_boot, seed=seed)
+    def draw_ci(fit_, at_):
+        return bootstrap_ci(fit_, at_.screen, lkf, at_.log_k, n_boot=n_boot, seed=seed)
 
-    ci = draw_ci(cv_cur.fit, ss, lkb) if current else {}
-    current, cv_cur, ss, lkb, ci, unsupported, stale = drop_unsupported(
-        current, tuple(sel.entered), cv_cur, ss, lkf, lkb, ci, draw_ci, reanchor, (ss_sel, lkb_sel), min_change, steps)
+    ci = draw_ci(cv_cur.fit, at) if current else {}
+    current, cv_cur, at, ci, unsupported, stale = drop_unsupported(
+        current, tuple(sel.entered), cv_cur, at, lkf, ci, draw_ci, reanchor, at_empty, min_change, steps)
     for u in unsupported:
         beside = f", beside {u['dropped_with']}, which it entered the model with as a pair" if "dropped_with" in u else ""
         if u["covers_null"]:
@@ -381,10 +381,9 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     r_after = final.residual
     F["r_before"] = r_before
     F["r_after_cv"] = r_after
-    F["log_k_model"] = predict_log_k(ss, lkb, final.fit.specs)  # the fitted model's own stiffness
+    F["log_k_model"] = at.predict(final.fit.specs)  # the fitted model's own stiffness
     F["log_k_base"] = lkb0
     F["r_after_in"] = lkf - F.log_k_model
-    lka = lkb  # the engine at the last anchor
     # the held-out prediction: the level the held-out residual is compared with (both from the fold
     # that left the cane out, so neither carries the cane's own measurement)
     F["log_k_model_cv"] = lkf - r_after
@@ -397,10 +396,10 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                       "ci95": ci_of(spec, ci),
                       "units": spec.units()})
         fx1 = AppliedEffects([spec.instance()])
-        if fx1.changes_diameter and len(ss.cal_s):
+        if fx1.changes_diameter and len(at.screen.cal_s):
             # what the calipers would have read differently (mm), against their own scatter
-            named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(ss.caliper_change(fx1)))),
-                                           "caliper_scatter": 1e3 * ss.cal_sigma}
+            named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(at.screen.caliper_change(fx1)))),
+                                           "caliper_scatter": 1e3 * at.screen.cal_sigma}
     if obstruction or early:
         local = {k: {"onset_mm": v} for k, v in onsets.items()}
         local.update({k: {"onset_mm": e.onset_mm, "contact_mm": e.contact_mm, "excluded": True}
@@ -417,7 +416,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     def shape_of(specs, level):
         return engine_runs.model_shape_check(engine, run, specs, seed, level)
 
-    verdict = judge(F, r_before, r_after, lkf, ss0, lkb0, ss, lkb, final, current, candidates, unsupported, named,
+    verdict = judge(F, r_before, r_after, lkf, at0, at, final, current, candidates, unsupported, named,
                     cfg0.diameter_factor, shape_of, notes, timing, seed)
     named, partial, adequacy = verdict.named, verdict.partial, verdict.adequacy
     fitted = tuple(final.fit.specs)
@@ -440,7 +439,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         # every engine is worth seeing; the named model's "after" is the "before"
         engines = engine_runs.confirm(trials, backends or [base_backend], proto=proto, base_config=cfg_b,
                                       model=partial_config or model, F=F, final=final,
-                                      anchor=engine_runs.Anchored(ss, lka), baseline=engine_runs.Anchored(ss0, lkb0),
+                                      anchor=at, baseline=at0,
                                       out=outp, executor=executor, progress=progress)
         timing["confirm_s"] = time.perf_counter() - t5
         gap["per_backend"] = {r.backend: {"model": "partial" if partial else "named", **{k: getattr(r, k) for k in (

@@ -30,8 +30,8 @@ class _Screen(Exception):
     """Carries the first step's screen out of ``discover``."""
 
 
-def _grab(candidates, ss, lkf, lkb, *args, **kwargs):
-    raise _Screen(ss, lkf, lkb)
+def _grab(candidates, at, lkf, *args, **kwargs):
+    raise _Screen(at.screen, lkf, at.log_k)
 
 
 def _scipy_default(obj, x0, method=None, options=None):

@@ -6,7 +6,7 @@ serial beam runs on 12 bundled trials). Prints the largest |engine - screen| in 
 import numpy as np, pandas as pd
 from canebench.data.dataset import bundled_dataset, load_dataset
 from canebench.discovery.screen import trial_geometry
-from canebench.discovery.screenset import ScreenSet, predict_log_k
+from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
 from canebench.discovery.engine_runs import BaselineEngine, ok_log_k, pitch_table
 from canebench.discovery.workflow import BASELINES
 from canebench.execute.runner import run_trials
@@ -21,7 +21,7 @@ F = pd.DataFrame({"trial": [t.id for t in trials]})
 eng = lambda specs: ok_log_k(run_trials(trials, [backend], proto, cfg0.replace(effects=specs), None, executor=EX).to_df(), backend, F.trial)
 lkb = eng(())
 ss = ScreenSet.build([trial_geometry(t, cfg0) for t in trials])
-ss_t, _ = pitch_table(BaselineEngine(trials, F, backend, proto, cfg0, (), None, EX, None), ss, lkb)
+ss_t = pitch_table(BaselineEngine(trials, F, backend, proto, cfg0, (), None, EX, None), Anchored(ss, lkb))[0].screen
 pitch = EffectSpec("probe_misalignment", (("angle_deg", 30.0),))
 for other in ("modulus_scale(scale=1.7)", "root_compliance(k_root=8)"):
     o = EffectSpec.parse(other)
