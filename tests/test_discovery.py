@@ -1710,3 +1710,25 @@ def test_the_trimmed_spreads_pool_the_kept_canes_exactly():
     one = ~((canes == 0) & (position > 0.2))
     w1 = within_trend_geometry(canes[one], resid[one], position[one], g[:, one])
     assert w1["sd_trimmed_canes"] == [], w1
+
+
+def test_a_fitted_flare_carries_the_note_that_a_support_below_the_pushes_looks_the_same():
+    """A flare is told apart from a neighbour's support below the pushes by nothing in stiffness
+    data (docs/discovery.md, seed 8's set 38): a named flare says so, with its decay length and
+    the canes' lowest pushes, and says the pair can match it when a root spring stands beside
+    it; a flare withheld as partial says so too. No flare fitted: no note."""
+    from canebench.discovery.checks_text import lookalike_notes
+
+    flare = {"effect": "base_flare", "scope": "global", "params": {"excess_mm": 4.2, "length_mm": 122.7}}
+    root = {"effect": "root_compliance", "scope": "global", "params": {"k_root": 459.0}}
+    obstruction = {"effect": "obstruction", "scope": "per_trial", "params": {}}
+    (alone,) = lookalike_notes([flare, obstruction], [], [896.0, 445.0, 610.0])
+    assert alone.startswith("base_flare, named,") and "decays over 123 mm" in alone
+    assert "445-896 mm" in alone and "lateral spring support" in alone and "root_compliance" not in alone
+    (beside,) = lookalike_notes([root, flare], [], [445.2, 444.9])
+    assert "root_compliance beside the flare can match it" in beside and "are 445 mm along" in beside
+    (withheld,) = lookalike_notes([obstruction], [root, flare], [445.0])
+    assert "withheld as partial" in withheld and "root_compliance beside" in withheld
+    assert lookalike_notes([root, obstruction], [], [445.0]) == []
+    assert lookalike_notes([], [root], [445.0]) == []
+    assert lookalike_notes([flare], [], []) == []

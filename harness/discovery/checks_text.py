@@ -89,6 +89,39 @@ def adequacy_lines(doc: dict[str, Any]) -> list[str]:
     return lines
 
 
+def lookalike_notes(named: list[dict[str, Any]], partial: list[dict[str, Any]],
+                    lowest_push_mm: list[float]) -> list[str]:
+    """What a fitted flare cannot be told apart from, in stiffness data: one sentence, or none.
+
+    A flare stiffens the cane below the pushes; so does a neighbouring cane (or a stake) touching
+    it below them, a lateral spring support the library does not have. Pushed only above both,
+    each changes a push's compliance by a quadratic in the push's position along the cane (for
+    a point support, a perfect square); a root spring beside the flare lets the pair take that
+    square on a cane. With three pushes a cane, spanning a fifth of its length, the data do not
+    resolve the difference (docs/discovery.md: seed 8's set 38, named root + flare for a support
+    at a third of each cane's length, below every push). ``named``: the result's names;
+    ``partial``: the global names withheld (a flare there gets the note too: the support is then
+    a candidate for what the library could not explain); ``lowest_push_mm``: each cane's lowest
+    scored push, along the cane from its base.
+    """
+    for names, how in ((named, "named,"), (partial, "fitted but withheld as partial,")):
+        flare = next((n for n in names if n["effect"] == "base_flare" and n["scope"] == "global"), None)
+        if flare is not None:
+            break
+    if flare is None or not lowest_push_mm:
+        return []
+    root = any(n["effect"] == "root_compliance" and n["scope"] == "global" for n in names)
+    lo, hi = min(lowest_push_mm), max(lowest_push_mm)
+    where = f"{lo:.0f} mm" if round(lo) == round(hi) else f"{lo:.0f}-{hi:.0f} mm"
+    length = flare["params"].get("length_mm")
+    decay = f" (its excess decays over {length:.0f} mm)" if length is not None else ""
+    return [f"base_flare, {how} stiffens the cane toward its base{decay}; the canes' lowest pushes are {where} "
+            f"along the cane: a neighbouring cane or stake touching it below them (a lateral spring support, not "
+            f"in the library) changes their stiffness in much the same pattern"
+            + (", and root_compliance beside the flare can match it" if root else "")
+            + "; stiffness from pushes above both does not tell them apart, so look at the plants for such contact"]
+
+
 def failure_reasons(adequacy: dict[str, Any]) -> list[str]:
     """Why the model fails its adequacy checks: one clause per check in ``adequacy["failed"]``.
 

@@ -248,7 +248,7 @@ class ScreenSet:
 M_PER_N_TO_MM_PER_N = 1e3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # eq=False: arrays have no truth value to compare by
 class Anchored:
     """A linear screen and the baseline engine's ln k it is anchored at, in the scored trials'
     order: what every fit predicts from, and what moves together when the screen is re-anchored
@@ -262,7 +262,10 @@ class Anchored:
         return predict_log_k(self.screen, self.log_k, specs)
 
     def subset(self, keep: np.ndarray) -> "Anchored":
-        """The trials where ``keep`` is true (:meth:`ScreenSet.subset`)."""
+        """The trials where the mask ``keep`` is true (:meth:`ScreenSet.subset`), in their order."""
+        keep = np.asarray(keep, bool)
+        if keep.shape != self.log_k.shape:
+            raise ValueError(f"a mask of {keep.shape} for {self.log_k.shape} trials")
         return Anchored(self.screen.subset(keep), self.log_k[keep])
 
 

@@ -79,9 +79,9 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
 
     ``F`` holds the scored trials (``cane``, ``height_m``, the residuals and ``log_k_model_cv``);
     ``r_before``/``r_after`` are the baseline's and the model's held-out residuals; ``baseline``
-    the screen at the baseline's ln k, ``anchor`` at the last anchor (:class:`.screenset.Anchored`). ``shape_of(specs, alpha)``
-    runs the traces' shape check of a model on the engine at level ``alpha``
-    (:func:`.engine_runs.model_shape_check`).
+    the screen at the baseline's ln k, ``anchor`` at the last anchor (:class:`.screenset.Anchored`).
+    ``shape_of(specs, alpha)`` runs the traces' shape check of a model on the engine at level
+    ``alpha`` (:func:`.engine_runs.model_shape_check`).
     Notes are appended to ``notes``, durations to ``timing``.
     """
     # -- structure before and after

@@ -98,6 +98,7 @@ from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
 from ..model.presets import PRESETS
 from ..probe.protocol import PROTOCOLS
 from . import engine_runs
+from .checks_text import lookalike_notes
 from .fit import bootstrap_ci
 from .nulls import ci_of
 from .onsets import detect_early_contact, detect_onset
@@ -419,6 +420,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     verdict = judge(F, r_before, r_after, lkf, at0, at, final, current, candidates, unsupported, named,
                     cfg0.diameter_factor, shape_of, notes, timing, seed)
     named, partial, adequacy = verdict.named, verdict.partial, verdict.adequacy
+    notes.extend(lookalike_notes(named, partial, list(1e3 * F.groupby("cane").s_push_m.min().dropna())))
     fitted = tuple(final.fit.specs)
     gap = {"before": _gap(r_before), "after_cv": _gap(r_after), "after_in_sample": _gap(F.r_after_in.to_numpy())}
     partial_config = None
