@@ -248,7 +248,7 @@ class ScreenSet:
 M_PER_N_TO_MM_PER_N = 1e3
 
 
-@dataclass(frozen=True, eq=False)  # eq=False: arrays have no truth value to compare by
+@dataclass(frozen=True, eq=False)  # eq=False: == on ndarray fields would not give a bool
 class Anchored:
     """A linear screen and the baseline engine's ln k it is anchored at, in the scored trials'
     order: what every fit predicts from, and what moves together when the screen is re-anchored
