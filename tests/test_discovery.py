@@ -1434,12 +1434,13 @@ def _scaled_bundled_screen(bundled_trials):
     return cfg, ss, lkb, canes, height, inv, rng, noise, (EffectSpec.parse("modulus_scale(scale=1.5)"),)
 
 
-def _power_law_diameters(bundled_trials, cfg, ss, inv, rng):
+def _power_law_diameters(bundled_trials, cfg, ss, inv, rng, low=0.4, high=2.2):
     """Each cane's diameters a power law a + b (1 - s/L)^p through its caliper line's values at the
-    calipers, p drawn from 0.4-2.2 per cane (the line itself where p is 1)."""
+    calipers, p drawn from ``low``-``high`` per cane (the line itself where p is 1). Also used by
+    ``tests/scripts/taper_scale_bias.py``."""
     from canebench.model.chain import cane_curve
 
-    expo = rng.uniform(0.4, 2.2, inv.max() + 1)
+    expo = rng.uniform(low, high, inv.max() + 1)
     d0 = ss.d0.copy()
     for i, t in enumerate(bundled_trials):
         L = cane_curve(t.cane, cfg).length

@@ -104,12 +104,11 @@ def lookalike_notes(named: list[dict[str, Any]], partial: list[dict[str, Any]],
     a candidate for what the library could not explain); ``lowest_push_mm``: each cane's lowest
     scored push, along the cane from its base.
     """
-    for names, how in ((named, "named,"), (partial, "fitted but withheld as partial,")):
-        flare = next((n for n in names if n["effect"] == "base_flare" and n["scope"] == "global"), None)
-        if flare is not None:
-            break
-    if flare is None or not lowest_push_mm:
+    found = [(n, how, names) for names, how in ((named, "named,"), (partial, "fitted but withheld as partial,"))
+             for n in names if n["effect"] == "base_flare" and n["scope"] == "global"]
+    if not found or not lowest_push_mm:
         return []
+    flare, how, names = found[0]
     root = any(n["effect"] == "root_compliance" and n["scope"] == "global" for n in names)
     lo, hi = min(lowest_push_mm), max(lowest_push_mm)
     where = f"{lo:.0f} mm" if round(lo) == round(hi) else f"{lo:.0f}-{hi:.0f} mm"

@@ -2,46 +2,31 @@
 
 Run from the repository: ``python tests/scripts/taper_scale_bias.py [N_DRAWS]`` (about a minute;
 no engine runs). On the bundled canes' geometry, each draw makes every cane's diameters a power
-law a + b (1 - s/L)^p through its caliper line's values at the calipers (as the test of the
-within-cane check does, ``tests/test_discovery.py``), with p drawn per cane from a range; hides
-a modulus scale of 1.5 with cane offsets (0.15 in ln) and trial noise (0.03); and fits, on the
-linear screen anchored at the caliper-line geometry, the scale alone and the scale beside a
-flare. Prints the median and worst relative error of the fitted scale per exponent range.
-The screen is the workflow's small-deflection linearization, so these are not the engines'
-figures; they say whether a flare fitted beside the scale would take the taper's pull.
+law a + b (1 - s/L)^p through its caliper line's values at the calipers (the within-cane
+check's test helper, ``tests/test_discovery.py::_power_law_diameters``), with p drawn per cane
+from a range; hides a modulus scale of 1.5 with cane offsets (0.15 in ln) and trial noise
+(0.03); and fits, on the linear screen anchored at the caliper-line geometry, the scale alone
+and the scale beside a flare. Prints the median and worst relative error of the fitted scale
+per exponent range. The screen is the workflow's small-deflection linearization, so these are
+not the engines' figures; they say whether a flare fitted beside the scale would take the
+taper's pull.
 """
 import sys
+from pathlib import Path
 
 import numpy as np
 
 from canebench.data.dataset import bundled_dataset, load_dataset
 from canebench.discovery.fit import Candidate, fit_candidate
-from canebench.discovery.screen import trial_geometry
-from canebench.discovery.screenset import ScreenSet, predict_log_k
-from canebench.model.chain import cane_curve
-from canebench.model.effects import EffectSpec
-from canebench.model.presets import PRESETS
+from canebench.discovery.screenset import predict_log_k
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests folder: its geometry helpers
+from test_discovery import _power_law_diameters, _scaled_bundled_screen  # noqa: E402
 
 n_draws = int(sys.argv[1]) if len(sys.argv) > 1 else 10
 trials = load_dataset(bundled_dataset())
-cfg = PRESETS["beam-consistent"]
-ss = ScreenSet.build([trial_geometry(t, cfg) for t in trials])
-lkb = -np.log(ss.c0 * 1e3)
-_, inv = np.unique(ss.canes, return_inverse=True)
-lengths = np.array([cane_curve(t.cane, cfg).length for t in trials])
-TRUE = 1.5
-scale = (EffectSpec.parse(f"modulus_scale(scale={TRUE})"),)
-
-
-def diameters(expo: np.ndarray) -> np.ndarray:
-    d0 = ss.d0.copy()
-    for i in range(len(trials)):
-        cs, cl = ss.cal_s[ss.cal_idx == i], ss.cal_line[ss.cal_idx == i]
-        x = lambda s: np.clip(1.0 - s / lengths[i], 0.0, 1.0) ** expo[inv[i]]  # noqa: E731
-        a, b = np.linalg.lstsq(np.column_stack([np.ones(len(cs)), x(cs)]), cl, rcond=None)[0]
-        q = ss.idx == i
-        d0[q] = a + b * x(ss.s[q])
-    return d0
+cfg, ss, lkb, _, _, inv, _, _, scale = _scaled_bundled_screen(trials)
+TRUE = dict(scale[0].params)["scale"]
 
 
 def fitted_scale(names: tuple[str, ...], lkf: np.ndarray) -> float:
@@ -53,9 +38,9 @@ for lo, hi in ((1.0, 1.0), (0.9, 1.15), (0.5, 2.0), (0.4, 2.2), (1.5, 2.2)):
     rng = np.random.default_rng(11)
     alone, beside = [], []
     for _ in range(n_draws):
-        expo = rng.uniform(lo, hi, inv.max() + 1)
+        d0 = _power_law_diameters(trials, cfg, ss, inv, rng, lo, hi)
         noise = rng.normal(0, 0.15, inv.max() + 1)[inv] + rng.normal(0, 0.03, len(lkb))
-        lkf = predict_log_k(ss.with_diameters(diameters(expo)), lkb, scale) + noise
+        lkf = predict_log_k(ss.with_diameters(d0), lkb, scale) + noise
         alone.append(fitted_scale(("modulus_scale",), lkf) / TRUE - 1)
         beside.append(fitted_scale(("modulus_scale", "base_flare"), lkf) / TRUE - 1)
     a, b = np.abs(alone), np.abs(beside)
