@@ -271,7 +271,7 @@ def test_an_anchored_screen_is_the_same_screen_moved_to_the_anchor(bundled_trial
     stiffness taken from the screen itself, every prediction is the un-anchored one (the rig's
     series part included), and at the anchor the prediction is the anchor's stiffness."""
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
     from canebench.model.effects import EffectSpec
     from canebench.model.presets import PRESETS
 
@@ -293,6 +293,20 @@ def test_an_anchored_screen_is_the_same_screen_moved_to_the_anchor(bundled_trial
     rows = np.array([0, 0, 3, 5, 8])
     tk = sa.take(rows, np.array(["a", "a", "b", "c", "d"]))
     np.testing.assert_allclose(predict_log_k(tk, lka[rows], ()), lkb[rows], rtol=0, atol=1e-10)
+    # Anchored carries its ln k along with every cut of its screen (what the fits are given)
+    at = Anchored(sa, lka)
+    np.testing.assert_allclose(at.subset(keep).predict(()), lkb[keep], rtol=0, atol=1e-10)
+    at_rows = at.take(rows, np.array(["a", "a", "b", "c", "d"]))
+    np.testing.assert_allclose(at_rows.predict(()), lkb[rows], rtol=0, atol=1e-10)
+    assert list(at_rows.screen.canes) == ["a", "a", "b", "c", "d"]
+    np.testing.assert_allclose(at.predict(anchor), lka, rtol=0, atol=0)
+    # the caliper line's own diameters recomputed give the anchor back; 10 % thicker moves even the
+    # anchor's own model, stiffer, but less than (1.1)^4 on the cane's part: the root's 20 N m/rad and
+    # the rig's 300 N/m do not scale with the section
+    np.testing.assert_allclose(at.with_diameters(sa.d0).predict(anchor), lka, rtol=0, atol=1e-10)
+    thick = at.with_diameters(sa.d0 * 1.1).predict(anchor)
+    cane = 1.0 / np.exp(lka) - 1e3 / 300.0
+    assert np.all(thick > lka + 1e-4) and np.all(thick < -np.log(cane / 1.1**4 + 1e3 / 300.0))
 
 
 @pytest.mark.field
@@ -695,7 +709,7 @@ def test_direction_test_holds_its_level_on_nulls_and_sees_a_global_shift():
     from canebench.discovery.fit import (Candidate, apply_vinv, direction_test_p, fit_candidate,
                                          variance_components)
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet
+    from canebench.discovery.screenset import Anchored, ScreenSet
     from canebench.model.presets import PRESETS
 
     cfg = PRESETS["beam-consistent"]
@@ -717,7 +731,7 @@ def test_direction_test_holds_its_level_on_nulls_and_sees_a_global_shift():
         from canebench.discovery.screenset import predict_log_k
 
         s2, t2 = variance_components(lkf - predict_log_k(ss, lkb, fixed), ss.canes)
-        return direction_test_p(name, ss, lkf, lkb, fixed, s2, t2, n_perm=2000, seed=int(rng.integers(1 << 30)),
+        return direction_test_p(name, Anchored(ss, lkb), lkf, fixed, s2, t2, n_perm=2000, seed=int(rng.integers(1 << 30)),
                                 project_fitted=project)
 
     # level 0.05 on 200 nulls: 10 expected; 18 or more has probability 0.01 at the nominal level
@@ -732,7 +746,7 @@ def test_direction_test_holds_its_level_on_nulls_and_sees_a_global_shift():
         ps = []
         for _ in range(60):
             lkf = draw(np.log(1.4))
-            fit = fit_candidate(Candidate.of(("modulus_scale",)), ss, lkf, lkb)
+            fit = fit_candidate(Candidate.of(("modulus_scale",)), Anchored(ss, lkb), lkf)
             ps.append(p_of("root_compliance", lkf, fit.specs, project))
         assert np.sum(np.array(ps) < 0.05) <= 7, (project, np.sort(ps)[:10])  # 3 expected; P(>= 8) = 0.02
     # a shift the size of the cane scatter (the hidden-effect suite's scale cases) on 18 canes
@@ -1000,7 +1014,7 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
 
     def run(hidden, protect):
         lkf = predict_log_k(ss, lkb, hidden) + scatter
-        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), ss, lkf, lkb))
+        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), Anchored(ss, lkb), lkf))
         calls.clear()
         steps = []
         out = backward(names, protect, cv, at, lkf, MIN_CHANGE, reanchor, steps, 3)
@@ -1062,7 +1076,7 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
         return tight(fit)
 
     def run(names, entered, override):
-        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), ss, lkf, lkb))
+        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), Anchored(ss, lkb), lkf))
         ci = {**tight(cv.fit), **override}
         calls.clear(), drawn.clear()
         steps = []
@@ -1115,7 +1129,7 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
 
     # the backward pass after a drop can empty the model: then it is the empty one's, with no engine run
     lkf_null = lkb + scatter
-    cv = SimpleNamespace(fit=fit_candidate(Candidate.of(("modulus_scale", "rig_compliance")), ss, lkf_null, lkb))
+    cv = SimpleNamespace(fit=fit_candidate(Candidate.of(("modulus_scale", "rig_compliance")), Anchored(ss, lkb), lkf_null))
     ci = {**tight(cv.fit), ("modulus_scale", "scale"): (0.9, 1.1), ("rig_compliance", "k_rig"): (5e3, 9e4)}
     calls.clear(), drawn.clear()
     current, cv, at_out, ci, unsupported, stale = drop_unsupported(
@@ -1156,7 +1170,7 @@ def test_a_flare_must_read_what_the_calipers_read(bundled_trials):
     diameter factor scales the line, not the calipers' scatter."""
     from canebench.discovery.fit import Candidate, fit_candidate
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
     from canebench.model.effects import AppliedEffects, EffectSpec
     from canebench.model.presets import PRESETS
 
@@ -1182,8 +1196,8 @@ def test_a_flare_must_read_what_the_calipers_read(bundled_trials):
         f = AppliedEffects([s.instance() for s in fit.specs])
         return np.abs(f.diameter(ss.cal_s, ss.cal_line) - ss.cal_line).max()
 
-    free = fit_candidate(Candidate.of(("base_flare",)), plain, lkf, lkb)
-    held = fit_candidate(Candidate.of(("base_flare",)), ss, lkf, lkb)
+    free = fit_candidate(Candidate.of(("base_flare",)), Anchored(plain, lkb), lkf)
+    held = fit_candidate(Candidate.of(("base_flare",)), Anchored(ss, lkb), lkf)
     assert change_at_calipers(free) > 3 * ss.cal_sigma
     assert change_at_calipers(held) < ss.cal_sigma
     # the term: 0.5 sum over canes of (change / scatter)^2, one cane at a time
@@ -1210,12 +1224,12 @@ def test_geometry_draws_carry_the_caliper_lines_least_squares_error_through_the_
     correlate; canes are independent."""
     from canebench.discovery.adequacy import geometry_draws
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
     from canebench.model.presets import PRESETS
 
     ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in bundled_trials])
     lkb = np.full(len(ss.trials), -3.0)  # any anchor: the draws are changes in ln k
-    g = geometry_draws(ss, lkb, (), n_draws=2000, seed=3)
+    g = geometry_draws(Anchored(ss, lkb), (), n_draws=2000, seed=3)
     assert g.shape == (2000, len(ss.trials))
     var_lin = np.zeros(len(ss.trials))
     h = 1e-6
@@ -1327,14 +1341,14 @@ def test_the_selection_score_test_holds_its_level_where_the_residual_carries_the
     from canebench.discovery.adequacy import geometry_draws
     from canebench.discovery.fit import Candidate, direction_test_p, fit_candidate
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet
+    from canebench.discovery.screenset import Anchored, ScreenSet
     from canebench.discovery.selection import ALPHA
     from canebench.discovery.workflow import SCREENED
     from canebench.model.presets import PRESETS
 
     ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in bundled_trials])
     lkb = -np.log(ss.c0 * 1e3)
-    g = geometry_draws(dataclasses.replace(ss, cal_sigma=0.9e-3), lkb, (), n_draws=100, seed=1)
+    g = geometry_draws(Anchored(dataclasses.replace(ss, cal_sigma=0.9e-3), lkb), (), n_draws=100, seed=1)
     assert 0.5 < np.std(g) < 1.5  # the line error moves ln k by about 0.9 at this scatter
     _, inv = np.unique(ss.canes, return_inverse=True)
     rng = np.random.default_rng(2)
@@ -1343,9 +1357,9 @@ def test_the_selection_score_test_holds_its_level_where_the_residual_carries_the
 
     def rejections(i, shift):
         lkf = lkb - g[i] + shift + rng.normal(0, 0.15, inv.max() + 1)[inv] + rng.normal(0, 0.05, len(lkb))
-        f0 = fit_candidate(Candidate.of(()), ss, lkf, lkb)
-        single = min(direction_test_p(c, ss, lkf, lkb, (), f0.s2, f0.t2, n_perm=2000, seed=i) for c in SCREENED)
-        pair = direction_test_p(pairs, ss, lkf, lkb, (), f0.s2, f0.t2, n_perm=2000, seed=i)
+        f0 = fit_candidate(Candidate.of(()), Anchored(ss, lkb), lkf)
+        single = min(direction_test_p(c, Anchored(ss, lkb), lkf, (), f0.s2, f0.t2, n_perm=2000, seed=i) for c in SCREENED)
+        pair = direction_test_p(pairs, Anchored(ss, lkb), lkf, (), f0.s2, f0.t2, n_perm=2000, seed=i)
         return single < level_single, pair < level_pair
 
     nulls = np.array([rejections(i, 0.0) for i in range(80)])
@@ -1479,7 +1493,7 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     others = tuple(c for c in SCREENED if c not in named)
 
     def check(lkf):
-        return within_after(cross_validate(Candidate.of(named), ss, lkf, lkb), at, canes, height, 1.0, 0)
+        return within_after(cross_validate(Candidate.of(named), at, lkf), at, canes, height, 1.0, 0)
 
     # (A) power-law tapers through each cane's caliper line
     d0 = _power_law_diameters(bundled_trials, cfg, ss, inv, rng)
@@ -1522,9 +1536,10 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
 
     cfg, ss, lkb, canes, height, inv, rng, noise, scale = _scaled_bundled_screen(bundled_trials)
 
+    at = Anchored(ss, lkb)
+
     def spread(lkf):
-        w = within_after(cross_validate(Candidate.of(("modulus_scale",)), ss, lkf, lkb), Anchored(ss, lkb), canes,
-                         height, 1.0, 0)
+        w = within_after(cross_validate(Candidate.of(("modulus_scale",)), at, lkf), at, canes, height, 1.0, 0)
         return w, within_dispersion(w, WITHIN_EXCESS, WITHIN_FLOOR)
 
     # (A) power-law tapers through each cane's caliper line

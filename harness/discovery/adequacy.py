@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from ..model.effects import EffectSpec
-from .screenset import ScreenSet, predict_log_k
+from .screenset import Anchored
 from .structure import _corr
 
 N_DRAWS = 2000
@@ -64,7 +64,7 @@ def _two_sided_p(null: np.ndarray, obs: float) -> float:
     return float(min(1.0, 2.0 * min((np.sum(null <= obs) + 1) / (B + 1), (np.sum(null >= obs) + 1) / (B + 1))))
 
 
-def geometry_draws(ss: ScreenSet, log_k_anchor: np.ndarray, specs: tuple[EffectSpec, ...], factor: float = 1.0,
+def geometry_draws(at: Anchored, specs: tuple[EffectSpec, ...], factor: float = 1.0,
                    n_draws: int = N_DRAWS, seed: int = 0) -> np.ndarray:
     """(n_draws, n_trials): the model's change in ln k when each cane's caliper line is off by its own error.
 
@@ -74,6 +74,7 @@ def geometry_draws(ss: ScreenSet, log_k_anchor: np.ndarray, specs: tuple[EffectS
     place only gets the centroid error.
     """
     rng = np.random.default_rng(seed)
+    ss = at.screen
     n = len(ss.trials)
     uniq, cane_of_trial = np.unique(ss.canes, return_inverse=True)
     sc = np.zeros(len(uniq))
@@ -89,13 +90,13 @@ def geometry_draws(ss: ScreenSet, log_k_anchor: np.ndarray, specs: tuple[EffectS
         sd_c[k] = ss.cal_sigma / math.sqrt(len(s))
         sd_b[k] = ss.cal_sigma / math.sqrt(sxx) if sxx > 1e-12 else 0.0
     k_q = cane_of_trial[ss.idx]
-    lk0 = predict_log_k(ss, log_k_anchor, specs)
+    lk0 = at.predict(specs)
     out = np.empty((n_draws, n))
     for b in range(n_draws):
         dc = rng.normal(0.0, 1.0, len(uniq)) * sd_c
         db = rng.normal(0.0, 1.0, len(uniq)) * sd_b
         d0 = ss.d0 + dc[k_q] + factor * db[k_q] * (ss.s - sc[k_q])
-        out[b] = predict_log_k(ss.with_diameters(d0), log_k_anchor, specs) - lk0
+        out[b] = at.with_diameters(d0).predict(specs) - lk0
     return out
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..model.effects import EFFECTS, AppliedEffects, EffectSpec, Parameter
-from .screenset import ScreenSet, predict_log_k
+from .screenset import Anchored
 
 SIGMA_FLOOR = 0.01  # ln units: below the field slope's own standard error on any trial
 #: Nelder-Mead's first simplex steps each free parameter by this share of its search range (in the
@@ -187,10 +187,11 @@ class Fit:
         return 2 * self.nll + (self.k_params + 2) * math.log(max(self.n, 1))
 
 
-def fit_candidate(cand: Candidate, ss: ScreenSet, log_k_field: np.ndarray, log_k_base: np.ndarray,
+def fit_candidate(cand: Candidate, at: Anchored, log_k_field: np.ndarray,
                   fixed: tuple[EffectSpec, ...] = (), x0: np.ndarray | None = None) -> Fit:
-    """Maximum likelihood of ``cand``'s free parameters (with ``fixed`` effects in place)."""
-    groups = ss.canes
+    """Maximum likelihood of ``cand``'s free parameters (with ``fixed`` effects in place), predicting
+    from the screen ``at`` (its anchor's ln k, in ``log_k_field``'s trial order)."""
+    groups = at.screen.canes
     # the calipers are data too: a diameter effect may not contradict their readings (whether one
     # is in the fit depends on the effects' names only, not on the parameter values tried)
     x_any = np.zeros(len(cand.free))
@@ -198,16 +199,15 @@ def fit_candidate(cand: Candidate, ss: ScreenSet, log_k_field: np.ndarray, log_k
 
     def obj(x: np.ndarray) -> float:
         specs = fixed + cand.specs(x)
-        lp = predict_log_k(ss, log_k_base, specs)
-        r = log_k_field - lp
+        r = log_k_field - at.predict(specs)
         if not np.all(np.isfinite(r)):
             return 1e12
-        penalty = ss.caliper_nll(AppliedEffects([s.instance() for s in specs])) if diameter else 0.0
+        penalty = at.screen.caliper_nll(AppliedEffects([s.instance() for s in specs])) if diameter else 0.0
         return nll(r, groups) + penalty
 
     if not cand.free:
         v = obj(np.zeros(0))
-        r = log_k_field - predict_log_k(ss, log_k_base, fixed)
+        r = log_k_field - at.predict(fixed)
         s2, t2 = variance_components(r, groups)
         return Fit(cand, np.zeros(0), fixed, v, s2, t2, len(r))
     starts = [x0] if x0 is not None else []
@@ -223,7 +223,7 @@ def fit_candidate(cand: Candidate, ss: ScreenSet, log_k_field: np.ndarray, log_k
             best = res
     x = best.x
     specs = fixed + cand.specs(x)
-    r = log_k_field - predict_log_k(ss, log_k_base, specs)
+    r = log_k_field - at.predict(specs)
     s2, t2 = variance_components(r, groups)
     return Fit(cand, x, specs, float(best.fun), s2, t2, len(r))
 
@@ -236,26 +236,26 @@ class CVResult:
     fold_specs: dict[str, tuple[EffectSpec, ...]] = field(default_factory=dict)
 
 
-def cross_validate(cand: Candidate, ss: ScreenSet, log_k_field: np.ndarray, log_k_base: np.ndarray,
+def cross_validate(cand: Candidate, at: Anchored, log_k_field: np.ndarray,
                    fixed: tuple[EffectSpec, ...] = (), full: Fit | None = None) -> CVResult:
     """Leave-one-cane-out: fit on the other canes, score the held-out cane."""
-    full = full or fit_candidate(cand, ss, log_k_field, log_k_base, fixed)
+    full = full or fit_candidate(cand, at, log_k_field, fixed)
+    canes = at.screen.canes
     loss: dict[str, float] = {}
     resid = np.full(len(log_k_field), np.nan)
     folds: dict[str, tuple[EffectSpec, ...]] = {}
-    for c in np.unique(ss.canes):
-        test = ss.canes == c
+    for c in np.unique(canes):
+        test = canes == c
         train = ~test
-        sub = ss.subset(train)
-        f = fit_candidate(cand, sub, log_k_field[train], log_k_base[train], fixed,
+        sub = at.subset(train)
+        f = fit_candidate(cand, sub, log_k_field[train], fixed,
                           x0=full.x if len(full.x) else None) if cand.free else None
         specs = f.specs if f is not None else fixed
         s2, t2 = (f.s2, f.t2) if f is not None else variance_components(
-            log_k_field[train] - predict_log_k(sub, log_k_base[train], fixed), ss.canes[train])
-        st = ss.subset(test)
-        r = log_k_field[test] - predict_log_k(st, log_k_base[test], specs)
+            log_k_field[train] - sub.predict(fixed), canes[train])
+        r = log_k_field[test] - at.subset(test).predict(specs)
         resid[test] = r
-        loss[str(c)] = float(np.sum(group_nll(r, ss.canes[test], s2, t2)))
+        loss[str(c)] = float(np.sum(group_nll(r, canes[test], s2, t2)))
         folds[str(c)] = specs
     return CVResult(full, loss, resid, folds)
 
@@ -305,8 +305,7 @@ def apply_vinv(x: np.ndarray, inv: np.ndarray, counts: np.ndarray, s2: float, t2
     return (x - (t2 * np.bincount(inv, x, minlength=len(counts)) / (s2 + counts * t2))[inv]) / s2
 
 
-def _fitted_directions(ss: ScreenSet, log_k_base: np.ndarray, fixed: tuple[EffectSpec, ...],
-                       base: np.ndarray) -> np.ndarray:
+def _fitted_directions(at: Anchored, fixed: tuple[EffectSpec, ...], base: np.ndarray) -> np.ndarray:
     """Central differences of ln k_pred in the fitted effects' internal coordinates (trials x params)."""
     names = tuple(sp.name for sp in fixed)
     if not names:
@@ -319,13 +318,13 @@ def _fitted_directions(ss: ScreenSet, log_k_base: np.ndarray, fixed: tuple[Effec
         xp, xm = x0.copy(), x0.copy()
         xp[j] += h
         xm[j] -= h
-        d = (predict_log_k(ss, log_k_base, cand.specs(xp)) - predict_log_k(ss, log_k_base, cand.specs(xm))) / (2 * h)
+        d = (at.predict(cand.specs(xp)) - at.predict(cand.specs(xm))) / (2 * h)
         if np.all(np.isfinite(d)) and np.max(np.abs(d)) > 1e-12:
             cols.append(d)  # a parameter at its bound or without effect gives no direction
     return np.column_stack(cols) if cols else np.zeros((len(base), 0))
 
 
-def direction_test_p(name: str | tuple[str, ...] | list[tuple[str, ...]], ss: ScreenSet, log_k_field: np.ndarray, log_k_base: np.ndarray,
+def direction_test_p(name: str | tuple[str, ...] | list[tuple[str, ...]], at: Anchored, log_k_field: np.ndarray,
                      fixed: tuple[EffectSpec, ...], s2: float, t2: float, n_per: int = 9, n_perm: int = 20000,
                      seed: int = 0, project_fitted: bool = False) -> float:
     """p that the residuals of the current model lean the way effect ``name`` would move them.
@@ -364,15 +363,15 @@ def direction_test_p(name: str | tuple[str, ...] | list[tuple[str, ...]], ss: Sc
         sets = [(n,) if isinstance(n, str) else tuple(n) for n in name]
     else:
         sets = [tuple(name)]
-    base = predict_log_k(ss, log_k_base, fixed)
+    base = at.predict(fixed)
     r = log_k_field - base
-    uniq, inv, counts = np.unique(ss.canes, return_inverse=True, return_counts=True)
+    uniq, inv, counts = np.unique(at.screen.canes, return_inverse=True, return_counts=True)
 
     def vinv(x: np.ndarray) -> np.ndarray:
         return apply_vinv(x, inv, counts, s2, t2)
 
     vr = vinv(r)
-    Q = _fitted_directions(ss, log_k_base, fixed, base) if project_fitted else np.zeros((len(r), 0))
+    Q = _fitted_directions(at, fixed, base) if project_fitted else np.zeros((len(r), 0))
     if Q.shape[1]:
         VQ = np.column_stack([vinv(q) for q in Q.T])
         G = Q.T @ VQ
@@ -383,7 +382,7 @@ def direction_test_p(name: str | tuple[str, ...] | list[tuple[str, ...]], ss: Sc
         # a joint grid over 3+ parameters: 125 directions, not 729
         points += [(cand, x) for x in cand.grid(min(n_per, 5) if len(cand.free) > 2 else n_per)]
     for cand, x in points:
-        pch = predict_log_k(ss, log_k_base, fixed + cand.specs(x)) - base
+        pch = at.predict(fixed + cand.specs(x)) - base
         if not np.all(np.isfinite(pch)) or np.max(np.abs(pch)) < 1e-9:
             continue  # the effect's null point (or an undefined one) is no direction
         if Q.shape[1]:
@@ -400,19 +399,19 @@ def direction_test_p(name: str | tuple[str, ...] | list[tuple[str, ...]], ss: Sc
     return flip_p(np.max(flips @ U, axis=1), obs, exact)
 
 
-def bootstrap_ci(fit: Fit, ss: ScreenSet, log_k_field: np.ndarray, log_k_base: np.ndarray,
+def bootstrap_ci(fit: Fit, at: Anchored, log_k_field: np.ndarray,
                  fixed: tuple[EffectSpec, ...] = (), n_boot: int = 100, seed: int = 0) -> dict[tuple[str, str], tuple[float, float]]:
     """95 % percentile intervals of the free parameters, resampling canes (the independent units)."""
     rng = np.random.default_rng(seed)
-    canes = np.unique(ss.canes)
+    of_trial = at.screen.canes
+    canes = np.unique(of_trial)
     draws = []
     for _ in range(n_boot):
         pick = rng.choice(canes, size=len(canes), replace=True)
-        rows = np.concatenate([np.flatnonzero(ss.canes == c) for c in pick])
+        rows = np.concatenate([np.flatnonzero(of_trial == c) for c in pick])
         # relabel repeated canes so each draw is its own group
-        labels = np.concatenate([[f"{c}#{k}"] * int(np.sum(ss.canes == c)) for k, c in enumerate(pick)])
-        sub = ss.take(rows, labels)
-        f = fit_candidate(fit.candidate, sub, log_k_field[rows], log_k_base[rows], fixed, x0=fit.x)
+        labels = np.concatenate([[f"{c}#{k}"] * int(np.sum(of_trial == c)) for k, c in enumerate(pick)])
+        f = fit_candidate(fit.candidate, at.take(rows, labels), log_k_field[rows], fixed, x0=fit.x)
         vals = {(sp.name, k): v for sp in f.specs[len(fixed):] for k, v in sp.params}
         draws.append([vals[key] for key in fit.candidate.free])
     arr = np.array(draws)

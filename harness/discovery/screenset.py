@@ -268,6 +268,17 @@ class Anchored:
             raise ValueError(f"a mask of {keep.shape} for {self.log_k.shape} trials")
         return Anchored(self.screen.subset(keep), self.log_k[keep])
 
+    def take(self, rows: np.ndarray, labels: np.ndarray | None = None) -> "Anchored":
+        """The trials at ``rows`` (repeats allowed, as a bootstrap draws them), their canes
+        relabelled ``labels`` (:meth:`ScreenSet.take`)."""
+        rows = np.asarray(rows, int)
+        return Anchored(self.screen.take(rows, labels), self.log_k[rows])
+
+    def with_diameters(self, d0: np.ndarray) -> "Anchored":
+        """The same trials and anchor with the caliper line's diameters ``d0`` at the screen's
+        points (:meth:`ScreenSet.with_diameters`)."""
+        return Anchored(self.screen.with_diameters(d0), self.log_k)
+
 
 def predict_log_k(ss: ScreenSet, log_k_base: np.ndarray, specs: tuple[EffectSpec, ...]) -> np.ndarray:
     """ln k_pred per trial (k in N/mm) under the effects ``specs``.

@@ -74,7 +74,7 @@ def forward_select(candidates: tuple[str, ...], at: Anchored, lkf: np.ndarray,
     # models the search has held: a forward step may not return to one, so an effect dropped as
     # stale can re-enter only beside a new partner, and the search terminates
     visited: set[frozenset[str]] = {frozenset()}
-    cv_cur = cross_validate(Candidate.of(()), at.screen, lkf, at.log_k)
+    cv_cur = cross_validate(Candidate.of(()), at, lkf)
     steps: list[dict[str, Any]] = []
     stop = ""
     too_small: dict[str, Any] | None = None
@@ -86,13 +86,13 @@ def forward_select(candidates: tuple[str, ...], at: Anchored, lkf: np.ndarray,
         ``test``: what the score test runs over (default ``add``'s own directions); ``full``: the
         all-canes fit when it is already at hand.
         """
-        cv = cross_validate(Candidate.of(current + add), at.screen, lkf, at.log_k, full=full)
+        cv = cross_validate(Candidate.of(current + add), at, lkf, full=full)
         # per held-out cane: mean |ln k_field/k_pred| before minus after (robust: one bad
         # trace cannot sink a cane, as it would under the Gaussian density)
         diff = l1_cur - _l1_by_cane(cv.residual, at.screen.canes)
         # significance: do the current residuals lean the way the effect moves them, cane by cane?
-        p = direction_test_p(test if test is not None else (add if len(add) > 1 else add[0]), at.screen, lkf,
-                             at.log_k, cv_cur.fit.specs, cv_cur.fit.s2, cv_cur.fit.t2, seed=seed)
+        p = direction_test_p(test if test is not None else (add if len(add) > 1 else add[0]), at, lkf,
+                             cv_cur.fit.specs, cv_cur.fit.s2, cv_cur.fit.t2, seed=seed)
         net = _net_change(at, cv.fit.specs, cv_cur.fit.specs)
         gain = float(diff.mean())
         med = float(np.median(np.abs(cv.residual)))
@@ -153,7 +153,7 @@ def forward_select(candidates: tuple[str, ...], at: Anchored, lkf: np.ndarray,
             # is tried at level alpha / 2 whenever it beats every single effect's BIC; its score
             # test is the max over every pair's joint directions (one test, whichever pair the
             # BIC picked)
-            fits = [fit_candidate(Candidate.of(current + pr), at.screen, lkf, at.log_k) for pr in pairs]
+            fits = [fit_candidate(Candidate.of(current + pr), at, lkf) for pr in pairs]
             i = int(np.argmin([f.bic for f in fits]))
             best_pair = pairs[i]
             if fits[i].bic < min(t["cv"].fit.bic for t in tried):
@@ -230,7 +230,7 @@ def _judge_pair(tp: dict[str, Any], pair: tuple[str, str], tried: list[dict[str,
         o = next(n for n in pair if n != m)
         # (a member dropped as stale earlier is no single candidate now: fitted here)
         other = (single[o]["cv"] if o in single
-                 else cross_validate(Candidate.of(current + (o,)), at.screen, lkf, at.log_k))
+                 else cross_validate(Candidate.of(current + (o,)), at, lkf))
         ok_m = (tp["cv"].fit.bic < other.fit.bic
                 and _net_change(at, tp["cv"].fit.specs, other.fit.specs) >= min_change)
         if ok and ok_m:
@@ -254,7 +254,7 @@ def stalest(current: tuple[str, ...], eligible: tuple[str, ...], cv_cur: Any, at
     """The effect in ``eligible`` whose removal from ``current`` (the others refitted) changes the model least."""
     best: dict[str, Any] = {}
     for name in eligible:
-        fit = fit_candidate(Candidate.of(tuple(c for c in current if c != name)), at.screen, lkf, at.log_k)
+        fit = fit_candidate(Candidate.of(tuple(c for c in current if c != name)), at, lkf)
         net = _net_change(at, fit.specs, cv_cur.fit.specs)
         if not best or net < best["net"]:
             best = {"name": name, "net": net, "fit": fit}
@@ -288,7 +288,7 @@ def backward(current: tuple[str, ...], protect: tuple[str, ...], cv_cur: Any, at
                       "params": {s.name: dict(s.params) for s in drop["fit"].specs}, "chosen": True,
                       "removed": drop["name"]})
         dropped.append(drop["name"])
-        cv_cur = cross_validate(Candidate.of(current), at.screen, lkf, at.log_k, full=drop["fit"])  # at hand
+        cv_cur = cross_validate(Candidate.of(current), at, lkf, full=drop["fit"])  # at hand
         at, cv_cur = reanchor(at, cv_cur)
     return current, cv_cur, at, dropped
 
@@ -326,7 +326,7 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
     groups = list(entered)
 
     def at_empty():
-        return empty, cross_validate(Candidate.of(()), empty.screen, lkf, empty.log_k)
+        return empty, cross_validate(Candidate.of(()), empty, lkf)
 
     def anchor(at_, cv_):
         # the backward pass may empty the model too: then the empty model's screen, as handed in
@@ -351,7 +351,7 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
         groups = _prune(groups, gone)
         if current:
             # the stalest search already fitted the model without ``name`` alone
-            cv_cur = cross_validate(Candidate.of(current), at.screen, lkf, at.log_k,
+            cv_cur = cross_validate(Candidate.of(current), at, lkf,
                                     full=least.get("fit") if gone == (name,) else None)
         else:
             at, cv_cur = at_empty()

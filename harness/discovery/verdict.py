@@ -93,8 +93,8 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     # one trend, and its stiffness-level feature is the field's, which contains the residual itself.
     # The null carries the caliper line's error, which level and residual share (.adequacy).
     canes_f = F.cane.to_numpy()
-    g_before = geometry_draws(baseline.screen, baseline.log_k, (), diameter_factor, seed=seed)
-    g_after = geometry_draws(anchor.screen, anchor.log_k, tuple(final.fit.specs), diameter_factor, seed=seed)
+    g_before = geometry_draws(baseline, (), diameter_factor, seed=seed)
+    g_after = geometry_draws(anchor, tuple(final.fit.specs), diameter_factor, seed=seed)
     adequacy = {"test": "between-cane correlation of the held-out residual with the model's ln k, against "
                         "the caliper-fit geometry's shared error (parametric bootstrap, two-sided)",
                 "alpha": ADEQUACY_ALPHA,
@@ -189,7 +189,7 @@ def within_after(cv: Any, at: Anchored, canes: np.ndarray, height: np.ndarray, f
                  seed: int) -> dict[str, Any]:
     """The within-cane check of a cross-validated model: its held-out residual against push height,
     with the model's own geometry draws in the null (as ``adequacy.within_after_cv``)."""
-    g = geometry_draws(at.screen, at.log_k, tuple(cv.fit.specs), factor, seed=seed)
+    g = geometry_draws(at, tuple(cv.fit.specs), factor, seed=seed)
     return within_trend_geometry(canes, cv.residual, height, g, seed=seed)
 
 
@@ -221,7 +221,7 @@ def within_taken_by(others: tuple[str, ...], current: tuple[str, ...], at: Ancho
     best: dict[str, Any] | None = None
     tried: list[dict[str, Any]] = []
     for c in others:
-        cv = cross_validate(Candidate.of(current + (c,)), at.screen, lkf, at.log_k)
+        cv = cross_validate(Candidate.of(current + (c,)), at, lkf)
         spec = next(s for s in cv.fit.specs if s.name == c)
         row: dict[str, Any] = {"effect": c, "params": dict(spec.params), "r": math.nan, "p": math.nan}
         par = EFFECTS[c].parameters

@@ -345,7 +345,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     t4 = time.perf_counter()
 
     def draw_ci(fit_, at_):
-        return bootstrap_ci(fit_, at_.screen, lkf, at_.log_k, n_boot=n_boot, seed=seed)
+        return bootstrap_ci(fit_, at_, lkf, n_boot=n_boot, seed=seed)
 
     ci = draw_ci(cv_cur.fit, at) if current else {}
     current, cv_cur, at, ci, unsupported, stale = drop_unsupported(

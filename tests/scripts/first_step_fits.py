@@ -19,6 +19,7 @@ import time
 import canebench.discovery.fit as fit
 import canebench.discovery.workflow as workflow
 from canebench.data.dataset import load_dataset
+from canebench.discovery.screenset import Anchored
 from canebench.discovery.workflow import SCREENED, discover
 from canebench.execute.executors import make_executor
 
@@ -51,7 +52,7 @@ def screen(path):
 def fits(ss, lkf, lkb, restarts, minimize=_minimize):
     fit.BOX_RESTARTS, fit.minimize = restarts, minimize
     t = time.perf_counter()
-    out = [fit.fit_candidate(fit.Candidate.of(g), ss, lkf, lkb) for g in GROUPS]
+    out = [fit.fit_candidate(fit.Candidate.of(g), Anchored(ss, lkb), lkf) for g in GROUPS]
     return out, time.perf_counter() - t
 
 

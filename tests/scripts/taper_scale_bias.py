@@ -18,7 +18,7 @@ import numpy as np
 
 from canebench.data.dataset import bundled_dataset, load_dataset
 from canebench.discovery.fit import Candidate, fit_candidate
-from canebench.discovery.screenset import predict_log_k
+from canebench.discovery.screenset import Anchored, predict_log_k
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests folder: its geometry helpers
 from test_discovery import _power_law_diameters, _scaled_bundled_screen  # noqa: E402
@@ -30,7 +30,7 @@ TRUE = dict(scale[0].params)["scale"]
 
 
 def fitted_scale(names: tuple[str, ...], lkf: np.ndarray) -> float:
-    f = fit_candidate(Candidate.of(names), ss, lkf, lkb)
+    f = fit_candidate(Candidate.of(names), Anchored(ss, lkb), lkf)
     return next(dict(s.params)["scale"] for s in f.specs if s.name == "modulus_scale")
 
 
