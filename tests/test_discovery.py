@@ -1014,7 +1014,7 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
 
     def run(hidden, protect):
         lkf = predict_log_k(ss, lkb, hidden) + scatter
-        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), Anchored(ss, lkb), lkf))
+        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), at, lkf))
         calls.clear()
         steps = []
         out = backward(names, protect, cv, at, lkf, MIN_CHANGE, reanchor, steps, 3)
@@ -1076,7 +1076,7 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
         return tight(fit)
 
     def run(names, entered, override):
-        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), Anchored(ss, lkb), lkf))
+        cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), at, lkf))
         ci = {**tight(cv.fit), **override}
         calls.clear(), drawn.clear()
         steps = []
@@ -1129,7 +1129,7 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
 
     # the backward pass after a drop can empty the model: then it is the empty one's, with no engine run
     lkf_null = lkb + scatter
-    cv = SimpleNamespace(fit=fit_candidate(Candidate.of(("modulus_scale", "rig_compliance")), Anchored(ss, lkb), lkf_null))
+    cv = SimpleNamespace(fit=fit_candidate(Candidate.of(("modulus_scale", "rig_compliance")), at, lkf_null))
     ci = {**tight(cv.fit), ("modulus_scale", "scale"): (0.9, 1.1), ("rig_compliance", "k_rig"): (5e3, 9e4)}
     calls.clear(), drawn.clear()
     current, cv, at_out, ci, unsupported, stale = drop_unsupported(

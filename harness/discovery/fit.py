@@ -190,7 +190,7 @@ class Fit:
 def fit_candidate(cand: Candidate, at: Anchored, log_k_field: np.ndarray,
                   fixed: tuple[EffectSpec, ...] = (), x0: np.ndarray | None = None) -> Fit:
     """Maximum likelihood of ``cand``'s free parameters (with ``fixed`` effects in place), predicting
-    from the screen ``at`` (its anchor's ln k, in ``log_k_field``'s trial order)."""
+    from the screen ``at``; ``at.log_k`` and ``log_k_field`` are in the same trial order."""
     groups = at.screen.canes
     # the calipers are data too: a diameter effect may not contradict their readings (whether one
     # is in the fit depends on the effects' names only, not on the parameter values tried)
@@ -403,14 +403,14 @@ def bootstrap_ci(fit: Fit, at: Anchored, log_k_field: np.ndarray,
                  fixed: tuple[EffectSpec, ...] = (), n_boot: int = 100, seed: int = 0) -> dict[tuple[str, str], tuple[float, float]]:
     """95 % percentile intervals of the free parameters, resampling canes (the independent units)."""
     rng = np.random.default_rng(seed)
-    of_trial = at.screen.canes
-    canes = np.unique(of_trial)
+    canes = at.screen.canes
+    uniq = np.unique(canes)
     draws = []
     for _ in range(n_boot):
-        pick = rng.choice(canes, size=len(canes), replace=True)
-        rows = np.concatenate([np.flatnonzero(of_trial == c) for c in pick])
+        pick = rng.choice(uniq, size=len(uniq), replace=True)
+        rows = np.concatenate([np.flatnonzero(canes == c) for c in pick])
         # relabel repeated canes so each draw is its own group
-        labels = np.concatenate([[f"{c}#{k}"] * int(np.sum(of_trial == c)) for k, c in enumerate(pick)])
+        labels = np.concatenate([[f"{c}#{k}"] * int(np.sum(canes == c)) for k, c in enumerate(pick)])
         f = fit_candidate(fit.candidate, at.take(rows, labels), log_k_field[rows], fixed, x0=fit.x)
         vals = {(sp.name, k): v for sp in f.specs[len(fixed):] for k, v in sp.params}
         draws.append([vals[key] for key in fit.candidate.free])

@@ -270,7 +270,7 @@ class Anchored:
 
     def take(self, rows: np.ndarray, labels: np.ndarray | None = None) -> "Anchored":
         """The trials at ``rows`` (repeats allowed, as a bootstrap draws them), their canes
-        relabelled ``labels`` (:meth:`ScreenSet.take`)."""
+        relabelled ``labels`` if given, else keeping their own (:meth:`ScreenSet.take`)."""
         rows = np.asarray(rows, int)
         return Anchored(self.screen.take(rows, labels), self.log_k[rows])
 
