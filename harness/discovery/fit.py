@@ -405,12 +405,13 @@ def bootstrap_ci(fit: Fit, at: Anchored, log_k_field: np.ndarray,
     rng = np.random.default_rng(seed)
     canes = at.screen.canes
     uniq = np.unique(canes)
+    rows_of = {c: np.flatnonzero(canes == c) for c in uniq}
     draws = []
     for _ in range(n_boot):
         pick = rng.choice(uniq, size=len(uniq), replace=True)
-        rows = np.concatenate([np.flatnonzero(canes == c) for c in pick])
+        rows = np.concatenate([rows_of[c] for c in pick])
         # relabel repeated canes so each draw is its own group
-        labels = np.concatenate([[f"{c}#{k}"] * int(np.sum(canes == c)) for k, c in enumerate(pick)])
+        labels = np.concatenate([[f"{c}#{k}"] * len(rows_of[c]) for k, c in enumerate(pick)])
         f = fit_candidate(fit.candidate, at.take(rows, labels), log_k_field[rows], fixed, x0=fit.x)
         vals = {(sp.name, k): v for sp in f.specs[len(fixed):] for k, v in sp.params}
         draws.append([vals[key] for key in fit.candidate.free])

@@ -266,7 +266,7 @@ class Anchored:
         keep = np.asarray(keep, bool)
         if keep.shape != self.log_k.shape:
             raise ValueError(f"a mask of {keep.shape} for {self.log_k.shape} trials")
-        return Anchored(self.screen.subset(keep), self.log_k[keep])
+        return self.take(np.flatnonzero(keep))
 
     def take(self, rows: np.ndarray, labels: np.ndarray | None = None) -> "Anchored":
         """The trials at ``rows`` (repeats allowed, as a bootstrap draws them), their canes

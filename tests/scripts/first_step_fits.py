@@ -19,7 +19,6 @@ import time
 import canebench.discovery.fit as fit
 import canebench.discovery.workflow as workflow
 from canebench.data.dataset import load_dataset
-from canebench.discovery.screenset import Anchored
 from canebench.discovery.workflow import SCREENED, discover
 from canebench.execute.executors import make_executor
 
@@ -32,7 +31,7 @@ class _Screen(Exception):
 
 
 def _grab(candidates, at, lkf, *args, **kwargs):
-    raise _Screen(at.screen, lkf, at.log_k)
+    raise _Screen(at, lkf)
 
 
 def _scipy_default(obj, x0, method=None, options=None):
@@ -49,20 +48,20 @@ def screen(path):
     raise RuntimeError("discover ended before its selection")
 
 
-def fits(ss, lkf, lkb, restarts, minimize=_minimize):
+def fits(at, lkf, restarts, minimize=_minimize):
     fit.BOX_RESTARTS, fit.minimize = restarts, minimize
     t = time.perf_counter()
-    out = [fit.fit_candidate(fit.Candidate.of(g), Anchored(ss, lkb), lkf) for g in GROUPS]
+    out = [fit.fit_candidate(fit.Candidate.of(g), at, lkf) for g in GROUPS]
     return out, time.perf_counter() - t
 
 
 flags = {a for a in sys.argv[1:] if a.startswith("--")}
 for path in (a for a in sys.argv[1:] if not a.startswith("--")):
-    ss, lkf, lkb = screen(path)
+    at, lkf = screen(path)
     if "--compare" in flags:
-        default, _ = fits(ss, lkf, lkb, 0, _scipy_default)
-        plain, t_plain = fits(ss, lkf, lkb, 0)
-        restarted, t_restart = fits(ss, lkf, lkb, 3)
+        default, _ = fits(at, lkf, 0, _scipy_default)
+        plain, t_plain = fits(at, lkf, 0)
+        restarted, t_restart = fits(at, lkf, 3)
         best = [min(a.bic, b.bic) for a, b in zip(default, plain)]
         worse = [("+".join(g), round(r.bic, 2), round(b, 2)) for g, r, b in zip(GROUPS, restarted, best)
                  if r.bic > b + 0.05]
@@ -70,6 +69,6 @@ for path in (a for a in sys.argv[1:] if not a.startswith("--")):
         print(f"{path}: restarts worse on {worse or 'none'}, better on {better}; "
               f"fitting time {t_restart / t_plain:.2f}x that without restarts", flush=True)
         continue
-    for g, f in zip(GROUPS, fits(ss, lkf, lkb, 0 if "--no-restart" in flags else fit.BOX_RESTARTS)[0]):
+    for g, f in zip(GROUPS, fits(at, lkf, 0 if "--no-restart" in flags else fit.BOX_RESTARTS)[0]):
         print(f"{'+'.join(g):38s} BIC {f.bic:8.1f}  "
               + "; ".join(f"{s.name}: " + ", ".join(f"{k} = {v:.4g}" for k, v in s.params) for s in f.specs))

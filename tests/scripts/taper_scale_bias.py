@@ -18,7 +18,7 @@ import numpy as np
 
 from canebench.data.dataset import bundled_dataset, load_dataset
 from canebench.discovery.fit import Candidate, fit_candidate
-from canebench.discovery.screenset import Anchored, predict_log_k
+from canebench.discovery.screenset import Anchored
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests folder: its geometry helpers
 from test_discovery import _power_law_diameters, _scaled_bundled_screen  # noqa: E402
@@ -27,10 +27,11 @@ n_draws = int(sys.argv[1]) if len(sys.argv) > 1 else 10
 trials = load_dataset(bundled_dataset())
 cfg, ss, lkb, _, _, inv, _, _, scale = _scaled_bundled_screen(trials)
 TRUE = dict(scale[0].params)["scale"]
+at = Anchored(ss, lkb)
 
 
 def fitted_scale(names: tuple[str, ...], lkf: np.ndarray) -> float:
-    f = fit_candidate(Candidate.of(names), Anchored(ss, lkb), lkf)
+    f = fit_candidate(Candidate.of(names), at, lkf)
     return next(dict(s.params)["scale"] for s in f.specs if s.name == "modulus_scale")
 
 
@@ -40,7 +41,7 @@ for lo, hi in ((1.0, 1.0), (0.9, 1.15), (0.5, 2.0), (0.4, 2.2), (1.5, 2.2)):
     for _ in range(n_draws):
         d0 = _power_law_diameters(trials, cfg, ss, inv, rng, lo, hi)
         noise = rng.normal(0, 0.15, inv.max() + 1)[inv] + rng.normal(0, 0.03, len(lkb))
-        lkf = predict_log_k(ss.with_diameters(d0), lkb, scale) + noise
+        lkf = at.with_diameters(d0).predict(scale) + noise
         alone.append(fitted_scale(("modulus_scale",), lkf) / TRUE - 1)
         beside.append(fitted_scale(("modulus_scale", "base_flare"), lkf) / TRUE - 1)
     a, b = np.abs(alone), np.abs(beside)
