@@ -94,7 +94,7 @@ def test_screen_prediction_is_the_engines_answer_for_every_screened_effect():
     from canebench.backends.pinocchio_backend import rest_linear_stiffness
     from canebench.data.dataset import bundled_dataset, load_dataset
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import ScreenSet, predict_log_k
+    from canebench.discovery.screenset import Anchored, ScreenSet
     from canebench.execute.executors import make_executor
     from canebench.execute.runner import run_trials
     from canebench.model.effects import EffectSpec
@@ -114,7 +114,7 @@ def test_screen_prediction_is_the_engines_answer_for_every_screened_effect():
 
     k0 = run(cfg)
     e = "rig_compliance(k_rig=150)"
-    pred = np.exp(predict_log_k(ss, np.log(k0), (EffectSpec.parse(e),)))
+    pred = np.exp(Anchored(ss, np.log(k0)).predict((EffectSpec.parse(e),)))
     k1 = run(cfg.replace(effects=(e,)))
     assert abs(np.log(k1 / k0)).max() > 0.05  # large enough to test
     # 2 %: the probe's trace is fitted over a finite push (test below)
@@ -127,7 +127,7 @@ def test_screen_prediction_is_the_engines_answer_for_every_screened_effect():
     for e in ("root_compliance(k_root=40)", "modulus_scale(scale=0.6)", "base_flare(excess_mm=5, length_mm=120)",
               "probe_misalignment(angle_deg=-20)"):
         l1 = lin(cfg.replace(effects=(e,)))
-        ratio = np.exp(predict_log_k(ss, np.zeros(len(l0)), (EffectSpec.parse(e),)))
+        ratio = np.exp(Anchored(ss, np.zeros(len(l0))).predict((EffectSpec.parse(e),)))
         assert abs(np.log(l1 / l0)).max() > 0.05, e
         # the 20-link chain against the beam quadrature: 2e-3 as in the tests above, except where a
         # soft root dominates (k drops ~10x at k_root = 40): the chain's root spring sits at its
@@ -271,7 +271,7 @@ def test_an_anchored_screen_is_the_same_screen_moved_to_the_anchor(bundled_trial
     stiffness taken from the screen itself, every prediction is the un-anchored one (the rig's
     series part included), and at the anchor the prediction is the anchor's stiffness."""
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
+    from canebench.discovery.screenset import Anchored, ScreenSet
     from canebench.model.effects import EffectSpec
     from canebench.model.presets import PRESETS
 
@@ -279,30 +279,31 @@ def test_an_anchored_screen_is_the_same_screen_moved_to_the_anchor(bundled_trial
     ss = ScreenSet.build([trial_geometry(t, cfg) for t in bundled_trials[:9]])
     lkb = np.log(np.linspace(0.01, 0.3, len(ss.trials)))
     anchor = (EffectSpec.parse("root_compliance(k_root=20)"), EffectSpec.parse("rig_compliance(k_rig=300)"))
-    lka = predict_log_k(ss, lkb, anchor)
+    lka = Anchored(ss, lkb).predict(anchor)
     sa = ss.anchored(anchor)
     for specs in [(), (EffectSpec.parse("rig_compliance(k_rig=80)"),),
                   (EffectSpec.parse("base_flare(excess_mm=6, length_mm=200)"),
                    EffectSpec.parse("probe_misalignment(angle_deg=20)"),
                    EffectSpec.parse("rig_compliance(k_rig=1000)"))]:
-        np.testing.assert_allclose(predict_log_k(sa, lka, specs), predict_log_k(ss, lkb, specs), rtol=0, atol=1e-10)
+        np.testing.assert_allclose(Anchored(sa, lka).predict(specs), Anchored(ss, lkb).predict(specs), rtol=0, atol=1e-10)
     # and the anchor survives subsetting (cross-validation folds) and resampling (the bootstrap)
 
     keep = np.arange(len(ss.trials)) % 2 == 0
-    np.testing.assert_allclose(predict_log_k(sa.subset(keep), lka[keep], ()), lkb[keep], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(Anchored(sa.subset(keep), lka[keep]).predict(()), lkb[keep], rtol=0, atol=1e-10)
     rows = np.array([0, 0, 3, 5, 8])
     tk = sa.take(rows, np.array(["a", "a", "b", "c", "d"]))
-    np.testing.assert_allclose(predict_log_k(tk, lka[rows], ()), lkb[rows], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(Anchored(tk, lka[rows]).predict(()), lkb[rows], rtol=0, atol=1e-10)
     # Anchored carries its ln k along with every cut of its screen (what the fits are given)
     at = Anchored(sa, lka)
     np.testing.assert_allclose(at.subset(keep).predict(()), lkb[keep], rtol=0, atol=1e-10)
     at_rows = at.take(rows, np.array(["a", "a", "b", "c", "d"]))
     np.testing.assert_allclose(at_rows.predict(()), lkb[rows], rtol=0, atol=1e-10)
     assert list(at_rows.screen.canes) == ["a", "a", "b", "c", "d"]
-    np.testing.assert_allclose(at.predict(anchor), lka, rtol=0, atol=0)
-    # the caliper line's own diameters recomputed give the anchor back; 10 % thicker moves even the
+    # at the anchor its ln k comes back as it is, and recomputed through the caliper line's own
+    # diameters (which leaves the anchor) it comes back to rounding; 10 % thicker moves even the
     # anchor's own model, stiffer, but less than (1.1)^4 on the cane's part: the root's 20 N m/rad and
     # the rig's 300 N/m do not scale with the section
+    np.testing.assert_array_equal(at.predict(anchor), lka)
     np.testing.assert_allclose(at.with_diameters(sa.d0).predict(anchor), lka, rtol=0, atol=1e-10)
     thick = at.with_diameters(sa.d0 * 1.1).predict(anchor)
     cane = 1.0 / np.exp(lka) - 1e3 / 300.0
@@ -728,9 +729,9 @@ def test_direction_test_holds_its_level_on_nulls_and_sees_a_global_shift():
         return lkb + shift + rng.normal(0, 0.3, len(canes))[inv] + rng.normal(0, 0.03, len(lkb))
 
     def p_of(name, lkf, fixed=(), project=False):
-        from canebench.discovery.screenset import predict_log_k
+        from canebench.discovery.screenset import Anchored
 
-        s2, t2 = variance_components(lkf - predict_log_k(ss, lkb, fixed), ss.canes)
+        s2, t2 = variance_components(lkf - Anchored(ss, lkb).predict(fixed), ss.canes)
         return direction_test_p(name, Anchored(ss, lkb), lkf, fixed, s2, t2, n_perm=2000, seed=int(rng.integers(1 << 30)),
                                 project_fitted=project)
 
@@ -999,7 +1000,7 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
     from types import SimpleNamespace
 
     from canebench.discovery.fit import Candidate, fit_candidate
-    from canebench.discovery.screenset import Anchored, predict_log_k
+    from canebench.discovery.screenset import Anchored
     from canebench.discovery.selection import MIN_CHANGE, backward, stalest
     from canebench.model.effects import EffectSpec
 
@@ -1013,7 +1014,7 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
         return at_, cv_
 
     def run(hidden, protect):
-        lkf = predict_log_k(ss, lkb, hidden) + scatter
+        lkf = Anchored(ss, lkb).predict(hidden) + scatter
         cv = SimpleNamespace(fit=fit_candidate(Candidate.of(names), at, lkf))
         calls.clear()
         steps = []
@@ -1052,13 +1053,13 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
     from types import SimpleNamespace
 
     from canebench.discovery.fit import Candidate, fit_candidate
-    from canebench.discovery.screenset import Anchored, predict_log_k
+    from canebench.discovery.screenset import Anchored
     from canebench.discovery.selection import MIN_CHANGE, drop_unsupported, stalest
     from canebench.model.effects import EFFECTS
 
     ss, lkb, scatter, truth = _seed7_pair_screen()
     at = Anchored(ss, lkb)
-    lkf = predict_log_k(ss, lkb, truth) + scatter
+    lkf = Anchored(ss, lkb).predict(truth) + scatter
     empty = Anchored(ss.subset(np.ones(len(lkb), bool)), lkb.copy())  # stands for the pre-selection screen
     calls, drawn = [], []
     root_high = EFFECTS["root_compliance"].parameters["k_root"].high
@@ -1170,7 +1171,7 @@ def test_a_flare_must_read_what_the_calipers_read(bundled_trials):
     diameter factor scales the line, not the calipers' scatter."""
     from canebench.discovery.fit import Candidate, fit_candidate
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
+    from canebench.discovery.screenset import Anchored, ScreenSet
     from canebench.model.effects import AppliedEffects, EffectSpec
     from canebench.model.presets import PRESETS
 
@@ -1188,7 +1189,7 @@ def test_a_flare_must_read_what_the_calipers_read(bundled_trials):
     at_cal = fx.diameter(ss.cal_s, ss.cal_line) - ss.cal_line
     assert at_cal.min() > 3 * ss.cal_sigma  # the calipers would have seen it
     canes, inv = np.unique(ss.canes, return_inverse=True)
-    lkf = predict_log_k(ss, lkb, (long_thin,)) + np.random.default_rng(3).normal(0, 0.05, len(canes))[inv]
+    lkf = Anchored(ss, lkb).predict((long_thin,)) + np.random.default_rng(3).normal(0, 0.05, len(canes))[inv]
     plain = ScreenSet(**{**ss.__dict__, "cal_idx": ss.cal_idx[:0], "cal_s": ss.cal_s[:0],
                          "cal_line": ss.cal_line[:0], "cal_w": ss.cal_w[:0]})
 
@@ -1224,7 +1225,7 @@ def test_geometry_draws_carry_the_caliper_lines_least_squares_error_through_the_
     correlate; canes are independent."""
     from canebench.discovery.adequacy import geometry_draws
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
+    from canebench.discovery.screenset import Anchored, ScreenSet
     from canebench.model.presets import PRESETS
 
     ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in bundled_trials])
@@ -1238,9 +1239,9 @@ def test_geometry_draws_carry_the_caliper_lines_least_squares_error_through_the_
         s = ss.cal_s[ss.cal_idx == i]
         sc, sxx = s.mean(), np.sum((s - s.mean()) ** 2)
         pts = np.isin(ss.idx, np.flatnonzero(ss.canes == cane))
-        base = predict_log_k(ss.with_diameters(ss.d0), lkb, ())[i]
-        jc = (predict_log_k(ss.with_diameters(ss.d0 + h * pts), lkb, ())[i] - base) / h
-        jb = (predict_log_k(ss.with_diameters(ss.d0 + h * pts * (ss.s - sc)), lkb, ())[i] - base) / h
+        base = Anchored(ss.with_diameters(ss.d0), lkb).predict(())[i]
+        jc = (Anchored(ss.with_diameters(ss.d0 + h * pts), lkb).predict(())[i] - base) / h
+        jb = (Anchored(ss.with_diameters(ss.d0 + h * pts * (ss.s - sc)), lkb).predict(())[i] - base) / h
         assert jc > 0  # a thicker line: a stiffer cane
         var_lin[i] = ss.cal_sigma**2 * (jc**2 / len(s) + jb**2 / sxx)
     np.testing.assert_allclose(g.var(axis=0), var_lin, rtol=0.10)
@@ -1256,7 +1257,7 @@ def test_geometry_draws_carry_the_caliper_lines_least_squares_error_through_the_
     cal = {c: (ss.cal_s[ss.cal_idx == first[c]], ss.cal_line[ss.cal_idx == first[c]]) for c in canes}
     base_fit = {c: fit_diameter(*cal[c]) for c in canes}
     cane_q = ss.canes[ss.idx]
-    lk0 = predict_log_k(ss.with_diameters(ss.d0), lkb, ())
+    lk0 = Anchored(ss.with_diameters(ss.d0), lkb).predict(())
     mc = np.empty((2000, len(ss.trials)))
     for b in range(2000):
         dd = np.zeros_like(ss.d0)
@@ -1265,7 +1266,7 @@ def test_geometry_draws_carry_the_caliper_lines_least_squares_error_through_the_
             refit = fit_diameter(s_c, line + rng.normal(0.0, ss.cal_sigma, len(s_c)))
             q = cane_q == c
             dd[q] = refit(ss.s[q]) - base_fit[c](ss.s[q])
-        mc[b] = predict_log_k(ss.with_diameters(ss.d0 + dd), lkb, ()) - lk0
+        mc[b] = Anchored(ss.with_diameters(ss.d0 + dd), lkb).predict(()) - lk0
     ratio = g.var(axis=0) / mc.var(axis=0)
     assert np.all(np.abs(ratio - 1) < 0.25) and abs(ratio.mean() - 1) < 0.05, ratio
     same = [(i, j) for i in range(len(ss.trials)) for j in range(i) if ss.canes[i] == ss.canes[j]]
@@ -1379,7 +1380,7 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     0.01 (a fifth of the 0.05 materiality step; measured 0.0018 at most)."""
     from canebench.data.dataset import bundled_dataset, load_dataset
     from canebench.discovery.screen import trial_geometry
-    from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
+    from canebench.discovery.screenset import Anchored, ScreenSet
     from canebench.discovery.engine_runs import BaselineEngine, ok_log_k, pitch_table
     from canebench.discovery.workflow import BASELINES
     from canebench.execute.executors import SerialExecutor
@@ -1404,8 +1405,8 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
         res = run_trials(trials, [backend], proto, cfg0.replace(effects=(spec,)), None, executor=ex).to_df()
         eng = ok_log_k(res, backend, F.trial)
         assert np.all(np.isfinite(eng))
-        without = np.max(np.abs(eng - predict_log_k(ss, lkb, (spec,))))
-        with_table = np.max(np.abs(eng - predict_log_k(ss_t, lkb, (spec,))))
+        without = np.max(np.abs(eng - Anchored(ss, lkb).predict((spec,))))
+        with_table = np.max(np.abs(eng - Anchored(ss_t, lkb).predict((spec,))))
         if abs(angle) == 30.0:
             assert without > 0.04  # the premise: the nonlinearity is material there
         assert with_table < 0.01, (angle, with_table, without)
@@ -1416,16 +1417,16 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
     b = EffectSpec("probe_misalignment", (("angle_deg", -30.0),))
     eng_b = ok_log_k(run_trials(trials, [backend], proto, cfg0.replace(effects=(b,)), None,
                                  executor=ex).to_df(), backend, F.trial)
-    assert np.max(np.abs(eng_b - predict_log_k(ss_a, lka, (b,)))) < 0.01
+    assert np.max(np.abs(eng_b - Anchored(ss_a, lka).predict((b,)))) < 0.01
     # cross-validation folds and bootstrap resamples carry each trial's own row of the table
 
-    full = predict_log_k(ss_a, lka, (b,))
+    full = Anchored(ss_a, lka).predict((b,))
     keep = np.arange(len(trials)) % 3 != 0
     # equal to rounding (a subset's sums run in another SIMD order on some CPUs); a trial given
     # another trial's row of the table would be off by the rows' difference, 1e-3 or more here
-    np.testing.assert_allclose(predict_log_k(ss_a.subset(keep), lka[keep], (b,)), full[keep], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(Anchored(ss_a.subset(keep), lka[keep]).predict((b,)), full[keep], rtol=0, atol=1e-12)
     rows = np.array([5, 5, 0, 11])
-    np.testing.assert_allclose(predict_log_k(ss_a.take(rows, np.array(["a", "a", "b", "c"])), lka[rows], (b,)),
+    np.testing.assert_allclose(Anchored(ss_a.take(rows, np.array(["a", "a", "b", "c"])), lka[rows]).predict((b,)),
                                full[rows], rtol=0, atol=1e-12)
 
 
@@ -1483,7 +1484,7 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
     80 mm; 7 mm over 110 mm, measured in review): three pushes a cane do not tell a moderate
     weak zone from a fuller base, as docs/discovery.md states."""
     from canebench.discovery.fit import Candidate, cross_validate
-    from canebench.discovery.screenset import Anchored, predict_log_k
+    from canebench.discovery.screenset import Anchored
     from canebench.discovery.verdict import ADEQUACY_ALPHA, within_after, within_taken_by
     from canebench.discovery.workflow import SCREENED
 
@@ -1497,7 +1498,7 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
 
     # (A) power-law tapers through each cane's caliper line
     d0 = _power_law_diameters(bundled_trials, cfg, ss, inv, rng)
-    taper = predict_log_k(ss.with_diameters(d0), lkb, scale) + noise
+    taper = Anchored(ss.with_diameters(d0), lkb).predict(scale) + noise
     w = check(taper)
     assert w["p"] < ADEQUACY_ALPHA, w  # the premise: the scale alone leaves the trend
     taken, tried = within_taken_by(others, named, at, taper, canes, height, 1.0, w["n_trials"], 0)
@@ -1509,7 +1510,7 @@ def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_tak
 
     # (B) a weak zone between the lower pushes
     rank = np.array([int((height[inv == inv[i]] < height[i]).sum()) for i in range(len(height))])  # 0 = lowest
-    canker = predict_log_k(ss, lkb, scale) + noise - np.array([0.0, 0.4, 1.1])[rank]
+    canker = Anchored(ss, lkb).predict(scale) + noise - np.array([0.0, 0.4, 1.1])[rank]
     w = check(canker)
     assert w["p"] < ADEQUACY_ALPHA, w
     taken, tried = within_taken_by(others, named, at, canker, canes, height, 1.0, w["n_trials"], 0)
@@ -1531,7 +1532,7 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
     it did not, p = 0.10)."""
     from canebench.discovery.adequacy import within_dispersion
     from canebench.discovery.fit import Candidate, cross_validate
-    from canebench.discovery.screenset import Anchored, predict_log_k
+    from canebench.discovery.screenset import Anchored
     from canebench.discovery.verdict import WITHIN_EXCESS, WITHIN_FLOOR, within_after
 
     cfg, ss, lkb, canes, height, inv, rng, noise, scale = _scaled_bundled_screen(bundled_trials)
@@ -1544,7 +1545,7 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
 
     # (A) power-law tapers through each cane's caliper line
     d0 = _power_law_diameters(bundled_trials, cfg, ss, inv, rng)
-    w, d = spread(predict_log_k(ss.with_diameters(d0), lkb, scale) + noise)
+    w, d = spread(Anchored(ss.with_diameters(d0), lkb).predict(scale) + noise)
     assert w["sd"] > w["geometry_sd"] > 0 and not d["fails"], d  # the tapers add spread, within the allowance
 
     # (B) a spring above the pushes on even canes, below them on odd ones
@@ -1558,10 +1559,10 @@ def test_pushes_scattered_along_their_canes_beyond_the_calipers_error_withhold_n
     c_aa = a**3 / (3.0 * ei)
     k_s = 500.0
     stiffening = np.log(c_hh / (c_hh - c_ha**2 * k_s / (1.0 + k_s * c_aa)))
-    w, d = spread(predict_log_k(ss, lkb, scale) + noise + stiffening)
+    w, d = spread(Anchored(ss, lkb).predict(scale) + noise + stiffening)
     assert d["fails"] and d["ratio"] > WITHIN_EXCESS and d["sd"] >= WITHIN_FLOOR, (w, d)
     # the spread alone, not the trend: without the springs the same canes pass
-    w0, d0_ = spread(predict_log_k(ss, lkb, scale) + noise)
+    w0, d0_ = spread(Anchored(ss, lkb).predict(scale) + noise)
     assert not d0_["fails"] and d0_["ratio"] < 2.0, d0_
 
 

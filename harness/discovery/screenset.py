@@ -203,7 +203,7 @@ class ScreenSet:
         """The same trials on other caliper-fit diameters ``d0`` (one per quadrature point).
 
         Still relative to this anchor's engine stiffness and compliance, but no longer *at* the
-        anchor: :func:`predict_log_k` must recompute even for the anchor's own effects (which it
+        anchor: :meth:`Anchored.predict` must recompute even for the anchor's own effects (which it
         otherwise returns unchanged), so the anchor tag is replaced by one no model matches.
         """
         from dataclasses import replace
@@ -258,8 +258,25 @@ class Anchored:
     log_k: np.ndarray
 
     def predict(self, specs: tuple[EffectSpec, ...]) -> np.ndarray:
-        """ln k of every trial with the effects ``specs`` (:func:`predict_log_k`)."""
-        return predict_log_k(self.screen, self.log_k, specs)
+        """ln k_pred per trial (k in N/mm) under the effects ``specs``.
+
+        ``log_k`` is the engine's stiffness at the screen's anchor (``screen.anchor``, no
+        effects unless :meth:`ScreenSet.anchored`): the cane part of its compliance is scaled
+        by the screened change and the series (rig) part replaced. At the anchor itself the
+        anchor's ln k is returned as it is.
+        """
+        ss = self.screen
+        if tuple(specs) == tuple(ss.anchor):
+            return self.log_k
+        fx = AppliedEffects([s.instance() for s in specs])
+        cc, series = ss.compliance(fx)
+        # stiffness is in N/mm throughout the harness; the series compliance comes in m/N
+        cane = np.exp(-self.log_k) - ss.s0 * M_PER_N_TO_MM_PER_N
+        # the pitch's nonlinearity (tension or compression along the cane) acts on the cane, not the rig
+        excess = ss.pitch_excess(fx.probe_pitch_deg()) - ss.pitch_excess(ss.anchor_pitch_deg)
+        inv = cane * (cc / ss.c0) * np.exp(-excess) + series * M_PER_N_TO_MM_PER_N
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return -np.log(inv)
 
     def subset(self, keep: np.ndarray) -> "Anchored":
         """The trials where the mask ``keep`` is true (:meth:`ScreenSet.subset`), in their order."""
@@ -278,26 +295,6 @@ class Anchored:
         """The same trials and anchor with the caliper line's diameters ``d0`` at the screen's
         points (:meth:`ScreenSet.with_diameters`)."""
         return Anchored(self.screen.with_diameters(d0), self.log_k)
-
-
-def predict_log_k(ss: ScreenSet, log_k_base: np.ndarray, specs: tuple[EffectSpec, ...]) -> np.ndarray:
-    """ln k_pred per trial (k in N/mm) under the effects ``specs``.
-
-    ``log_k_base`` is the engine's stiffness at the screen's anchor (``ss.anchor``,
-    no effects unless :meth:`ScreenSet.anchored`): the cane part of its compliance
-    is scaled by the screened change and the series (rig) part replaced.
-    """
-    if tuple(specs) == tuple(ss.anchor):
-        return log_k_base
-    fx = AppliedEffects([s.instance() for s in specs])
-    cc, series = ss.compliance(fx)
-    # stiffness is in N/mm throughout the harness; the series compliance comes in m/N
-    cane = np.exp(-log_k_base) - ss.s0 * M_PER_N_TO_MM_PER_N
-    # the pitch's nonlinearity (tension or compression along the cane) acts on the cane, not the rig
-    excess = ss.pitch_excess(fx.probe_pitch_deg()) - ss.pitch_excess(ss.anchor_pitch_deg)
-    inv = cane * (cc / ss.c0) * np.exp(-excess) + series * M_PER_N_TO_MM_PER_N
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return -np.log(inv)
 
 
 def _gather(owner: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

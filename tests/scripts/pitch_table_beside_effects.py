@@ -6,7 +6,7 @@ serial beam runs on 12 bundled trials). Prints the largest |engine - screen| in 
 import numpy as np, pandas as pd
 from canebench.data.dataset import bundled_dataset, load_dataset
 from canebench.discovery.screen import trial_geometry
-from canebench.discovery.screenset import Anchored, ScreenSet, predict_log_k
+from canebench.discovery.screenset import Anchored, ScreenSet
 from canebench.discovery.engine_runs import BaselineEngine, ok_log_k, pitch_table
 from canebench.discovery.workflow import BASELINES
 from canebench.execute.runner import run_trials
@@ -28,6 +28,6 @@ for other in ("modulus_scale(scale=1.7)", "root_compliance(k_root=8)"):
     lka = eng((o,)); truth = eng((o, pitch))
     for name, s in (("no table", ss), ("table", ss_t)):
         sa = s.anchored((o,))
-        print(f"anchored at {other}, +30 deg, {name}: max |engine - screen| {np.max(np.abs(truth - predict_log_k(sa, lka, (o, pitch)))):.3f}")
+        print(f"anchored at {other}, +30 deg, {name}: max |engine - screen| {np.max(np.abs(truth - Anchored(sa, lka).predict((o, pitch)))):.3f}")
     for name, s in (("no table", ss), ("table", ss_t)):
-        print(f"  from the baseline anchor, {other} + 30 deg, {name}: {np.max(np.abs(truth - predict_log_k(s, lkb, (o, pitch)))):.3f}")
+        print(f"  from the baseline anchor, {other} + 30 deg, {name}: {np.max(np.abs(truth - Anchored(s, lkb).predict((o, pitch)))):.3f}")
