@@ -316,11 +316,26 @@ def test_onset_on_the_real_elbow(field_dir):
     from canebench.discovery.onsets import detect_onset
     from canebench.execute.pipeline import field_stage
 
+    from canebench.discovery.workflow import field_onsets
+    from canebench.model.config import ModelConfig
+    from canebench.model.effects import EffectSpec
+
     t = load_dataset(field_dir, "b5c2t3")
-    ff = field_stage(t)["b5c2t3"].fit
+    fields = field_stage(t)
+    ff = fields["b5c2t3"].fit
     o = detect_onset(ff.displacement_mm, ff.force_n)
     # the README's elbow: 0.07 -> 1.9 N/mm near 37-40 mm
     assert o is not None and 30 <= o.onset_mm <= 42 and o.slope_after > 10 * o.slope_before
+    # the elbow is what leaves the whole trace unusable (R^2 0.62): the workflow searches it all
+    # the same, and up to the onset the trace is a usable line at the slope before the elbow
+    assert not ff.usable and ff.only_poorly_linear
+    onsets = field_onsets(fields)
+    assert set(onsets) == {"b5c2t3"} and onsets["b5c2t3"] == o.onset_mm
+    cut = ModelConfig().replace(effects=(EffectSpec("obstruction", (), (("b5c2t3", (("onset_mm", o.onset_mm),)),),
+                                                    "per_trial"),))
+    before = field_stage(t, None, cut)["b5c2t3"].fit
+    assert before.usable and before.r2 > 0.9
+    assert before.k_n_per_mm == pytest.approx(o.slope_before, rel=0.15)
 
 
 def test_third_party_effect_plugs_in(cantilever, monkeypatch):

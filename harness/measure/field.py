@@ -57,6 +57,8 @@ FORCE_LIMIT_GF = 1000.0
 RIG_FIT_THRESHOLD_GF = 20.0
 MIN_CONTACT_SAMPLES = 5
 MIN_R2 = 0.8
+#: the start of the reason a trace whose only fault is its straight line's fit carries
+POOR_FIT = "poor linear fit"
 ONSET_SEARCH_GF = 150.0  # hinge fitted over the record until the reading rises this much...
 ONSET_LINE_SAMPLES = 3  # ...and this many samples more
 
@@ -81,6 +83,12 @@ class FieldFit:
     ci_high: float = float("nan")
     window_mm: float | None = None  # fit window from onset (None: whole contact)
     k_first_10mm: float = float("nan")  # slope over the first 10 mm of contact, always
+
+    @property
+    def only_poorly_linear(self) -> bool:
+        """Unusable only because a straight line fits it poorly: the force rose, with a positive
+        slope, over enough contact samples. An elbow (a second body engaging) does this by itself."""
+        return not self.usable and self.reason.startswith(POOR_FIT)
 
     @property
     def n_steps(self) -> int:
@@ -159,7 +167,7 @@ def extract_field_stiffness(trial: RigTrial, window_mm: float | None = None, n_b
     elif fit is None or fit.slope <= 0:
         reason = "no positive slope"
     elif fit.r2 < MIN_R2:
-        reason = f"poor linear fit (R^2 = {fit.r2:.2f} < {MIN_R2})"
+        reason = f"{POOR_FIT} (R^2 = {fit.r2:.2f} < {MIN_R2})"
     if fit is None:
         return FieldFit(float("nan"), float("nan"), float("nan"), usable=False, reason=reason or "no fit", **base)
     rms = float(np.sqrt(np.mean((fs[w] - fit.intercept - fit.slope * xs[w]) ** 2)))
