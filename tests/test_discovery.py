@@ -1764,3 +1764,34 @@ def test_a_fitted_flare_carries_the_note_that_a_support_below_the_pushes_looks_t
     assert lookalike_notes([root, obstruction], [], [445.0]) == []
     assert lookalike_notes([], [root], [445.0]) == []
     assert lookalike_notes([flare], [], []) == []
+
+
+def test_an_elbow_that_spoils_the_line_is_found_and_scored_up_to_it():
+    """A second body engaging partway leaves the whole trace no line (R^2 < 0.8), the one fault
+    that makes a trace unusable by itself: its elbow is searched all the same, and up to it the
+    trace is the cane's line. A trial whose refit is still no line is named but not scored."""
+    from types import SimpleNamespace
+
+    from canebench.data.rig import RigTrial
+    from canebench.discovery.workflow import field_onsets, unscored_onsets
+    from canebench.measure.field import extract_field_stiffness
+    from canebench.units import GF_TO_N
+
+    rng = np.random.default_rng(4)
+    x = np.arange(0.0, 44.0, 0.5)
+    contact = np.maximum(x - 3.0, 0.0)  # 6 flat samples, then contact
+    # the cane at 5 gf/mm; a second body adds 50 gf/mm from 30 mm of contact on
+    f = -50.0 + 5.0 * contact + 50.0 * np.maximum(contact - 30.0, 0.0) + rng.normal(0, 1.0, len(x))
+    rig = RigTrial("elbow.csv", x, f, 0.5 * np.arange(len(x)), 700.0)
+    ff = extract_field_stiffness(rig, n_boot=50)
+    assert not ff.usable and ff.only_poorly_linear, ff.reason
+    onsets = field_onsets({"t": SimpleNamespace(fit=ff, reason=ff.reason)})
+    assert set(onsets) == {"t"} and abs(onsets["t"] - 30.0) <= 1.0
+    before = extract_field_stiffness(rig, window_mm=onsets["t"], n_boot=50)
+    assert before.usable and before.k_n_per_mm == pytest.approx(5.0 * GF_TO_N, rel=0.05)
+    # a trace that never rises is unusable for another reason, and is not searched
+    flat = extract_field_stiffness(RigTrial("flat.csv", x, -50.0 + 0.2 * contact + rng.normal(0, 1.0, len(x)),
+                                            0.5 * np.arange(len(x)), 700.0), n_boot=50)
+    assert not flat.usable and not flat.only_poorly_linear
+    fields = {"t": SimpleNamespace(fit=before, reason=""), "n": SimpleNamespace(fit=ff, reason=ff.reason)}
+    assert unscored_onsets({"t": 30.0, "n": 30.0, "gone": 9.0}, fields) == {"n": ff.reason, "gone": "no field fit"}

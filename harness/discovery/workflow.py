@@ -268,7 +268,9 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     early: dict[str, Any] = {}
     by_id = {t.id: t for t in trials}
     for tid, fr in fields0.items():
-        if fr.fit is not None and fr.fit.usable and by_id[tid].csv is not None and np.isfinite(fr.fit.onset_mm):
+        # (a trace fitted poorly as a whole is searched too: with an elbow it is scored up to it)
+        if (fr.fit is not None and (fr.fit.usable or fr.fit.only_poorly_linear) and by_id[tid].csv is not None
+                and np.isfinite(fr.fit.onset_mm)):
             rig = read_rig_csv(by_id[tid].csv)
             e = detect_early_contact(rig.displacement_mm, rig.force_gf, fr.fit.onset_mm)
             if e is not None:
@@ -280,6 +282,9 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                                   "per_trial"),)
     cfg_b = cfg0.replace(effects=obstruction)
     fields = field_stage(trials, proto.fit_window_mm, cfg_b)
+    # an elbow is reported wherever it is found; a trial whose trace is still no line up to it
+    # (noise, not the elbow, spoiled the fit) is not scored, and says why
+    unscored = unscored_onsets(onsets, fields)
     timing["field_s"] = time.perf_counter() - t_start
 
     # -- baseline simulation through the runner
@@ -402,12 +407,16 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(at.screen.caliper_change(fx1)))),
                                            "caliper_scatter": 1e3 * at.screen.cal_sigma}
     if obstruction or early:
-        local = {k: {"onset_mm": v} for k, v in onsets.items()}
+        local = {k: ({"onset_mm": v, "excluded": True, "reason": unscored[k]} if k in unscored else {"onset_mm": v})
+                 for k, v in onsets.items()}
         local.update({k: {"onset_mm": e.onset_mm, "contact_mm": e.contact_mm, "excluded": True}
                       for k, e in early.items()})
         named.append({"effect": "obstruction", "scope": "per_trial", "params": {},
                       "local": dict(sorted(local.items())), "ci95": {}, "n_trials": len(onsets),
-                      "n_excluded_early_contact": len(early)})
+                      "n_excluded_early_contact": len(early), "n_excluded_unscored": len(unscored)})
+    if unscored:
+        notes.append(f"{len(unscored)} trial(s) with an obstruction onset left out of the fit: up to the onset the "
+                     "trace is still no line (" + "; ".join(f"{k}: {v}" for k, v in sorted(unscored.items())) + ")")
     if early:
         notes.append(f"{len(early)} trial(s) left out of the fit: a soft contact ramp before the field stage's "
                      f"contact knee, which is an obstruction's onset ({', '.join(sorted(early))})")
@@ -463,6 +472,17 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     return result
 
 
+def unscored_onsets(onsets: dict[str, float], fields: dict) -> dict[str, str]:
+    """The trials of ``onsets`` whose field fit up to the onset (``fields``, refitted with the
+    obstruction) is still unusable, with the reason: they are named but not scored."""
+    out: dict[str, str] = {}
+    for tid in onsets:
+        fr = fields.get(tid)
+        if fr is None or fr.fit is None or not fr.fit.usable:
+            out[tid] = (fr.reason if fr is not None else "") or "no field fit"
+    return out
+
+
 def field_onsets(fields: dict) -> dict[str, float]:
     """Obstruction onsets (mm after contact) in the field traces, by trial id.
 
@@ -470,7 +490,8 @@ def field_onsets(fields: dict) -> dict[str, float]:
     the whole trace wherever contact ends within it, as every real trace does): an elbow past
     it changes no slope on either side, so it names nothing. Traces a straight line fits poorly
     are searched too: a strong elbow is what makes them so (the real b5c2t3's 27-fold one at
-    37 mm leaves R^2 = 0.62), and up to its onset the trace is scored like any other.
+    37 mm leaves R^2 = 0.62). Up to its onset such a trace is scored like any other where it is
+    a line there (:func:`unscored_onsets` lists those that are not).
     """
     onsets: dict[str, float] = {}
     for tid, fr in fields.items():

@@ -2,8 +2,9 @@
 
 Run from the repository: ``python tests/scripts/shape_check_real_pitch.py [FIELD_DIR]`` (default
 ``../shared/field-data``; about a minute of serial beam runs). The flare is the one
-``canebench discover`` fits on the real trials (docs/discovery.md); trials with an obstruction
-onset are left out, as the workflow does. Prints the check's p and beta per pitch, and how the
+``canebench discover`` named on the real trials until 208bf78, which scores b5c2t3 up to its
+elbow and names nothing global since (docs/discovery.md); trials with an obstruction onset are
+left out here. Prints the check's p and beta per pitch, and how the
 traces' stiffening relative to the beam trends with the push's length.
 """
 import sys
