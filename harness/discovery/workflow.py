@@ -269,8 +269,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     by_id = {t.id: t for t in trials}
     for tid, fr in fields0.items():
         # (a trace fitted poorly as a whole is searched too: with an elbow it is scored up to it)
-        if (fr.fit is not None and (fr.fit.usable or fr.fit.only_poorly_linear) and by_id[tid].csv is not None
-                and np.isfinite(fr.fit.onset_mm)):
+        if fr.fit is not None and fr.fit.rises and by_id[tid].csv is not None and np.isfinite(fr.fit.onset_mm):
             rig = read_rig_csv(by_id[tid].csv)
             e = detect_early_contact(rig.displacement_mm, rig.force_gf, fr.fit.onset_mm)
             if e is not None:
@@ -495,8 +494,7 @@ def field_onsets(fields: dict) -> dict[str, float]:
     """
     onsets: dict[str, float] = {}
     for tid, fr in fields.items():
-        if (fr.fit is not None and (fr.fit.usable or fr.fit.only_poorly_linear)
-                and fr.fit.displacement_mm is not None):
+        if fr.fit is not None and fr.fit.rises and fr.fit.displacement_mm is not None:
             within = fr.fit.displacement_mm <= SIM_TRAVEL_MM
             o = detect_onset(fr.fit.displacement_mm[within], fr.fit.force_n[within])
             if o is not None:

@@ -57,8 +57,6 @@ FORCE_LIMIT_GF = 1000.0
 RIG_FIT_THRESHOLD_GF = 20.0
 MIN_CONTACT_SAMPLES = 5
 MIN_R2 = 0.8
-#: the start of the reason a trace whose only fault is its straight line's fit carries
-POOR_FIT = "poor linear fit"
 ONSET_SEARCH_GF = 150.0  # hinge fitted over the record until the reading rises this much...
 ONSET_LINE_SAMPLES = 3  # ...and this many samples more
 
@@ -75,6 +73,9 @@ class FieldFit:
     tare_gf: float
     usable: bool
     reason: str = ""
+    #: why it is unusable, as a code (``reason`` says it in words): "" when usable, else one of
+    #: "contact_samples", "window_samples", "no_rise", "no_slope", "poor_fit", "no_fit"
+    fault: str = ""
     flags: list[str] = field(default_factory=list)
     displacement_mm: np.ndarray | None = None  # contact samples, from onset
     force_n: np.ndarray | None = None
@@ -88,7 +89,13 @@ class FieldFit:
     def only_poorly_linear(self) -> bool:
         """Unusable only because a straight line fits it poorly: the force rose, with a positive
         slope, over enough contact samples. An elbow (a second body engaging) does this by itself."""
-        return not self.usable and self.reason.startswith(POOR_FIT)
+        return self.fault == "poor_fit"
+
+    @property
+    def rises(self) -> bool:
+        """The contact force rose with a positive slope over enough samples: usable, or unusable
+        only for its line's fit (the traces an obstruction elbow is looked for in)."""
+        return self.usable or self.only_poorly_linear
 
     @property
     def n_steps(self) -> int:
@@ -157,20 +164,22 @@ def extract_field_stiffness(trial: RigTrial, window_mm: float | None = None, n_b
     base = dict(n_contact=int(keep.sum()), onset_mm=float(x[i0]), tare_gf=float(tare), flags=flags,
                 displacement_mm=xs, force_n=fs, window_mm=window_mm,
                 k_first_10mm=f10.slope if f10 is not None else float("nan"))
-    reason = ""
+    reason, fault = "", ""
     if keep.sum() < MIN_CONTACT_SAMPLES:
-        reason = f"only {int(keep.sum())} contact samples (< {MIN_CONTACT_SAMPLES})"
+        reason, fault = f"only {int(keep.sum())} contact samples (< {MIN_CONTACT_SAMPLES})", "contact_samples"
     elif w.sum() < MIN_CONTACT_SAMPLES:
-        reason = f"only {int(w.sum())} samples in the {window_mm:g} mm fit window (< {MIN_CONTACT_SAMPLES})"
+        reason, fault = (f"only {int(w.sum())} samples in the {window_mm:g} mm fit window (< {MIN_CONTACT_SAMPLES})",
+                         "window_samples")
     elif (f[keep] - tare).max() <= RIG_FIT_THRESHOLD_GF:
-        reason = f"contact force never exceeds {RIG_FIT_THRESHOLD_GF:g} gf after taring"
+        reason, fault = f"contact force never exceeds {RIG_FIT_THRESHOLD_GF:g} gf after taring", "no_rise"
     elif fit is None or fit.slope <= 0:
-        reason = "no positive slope"
+        reason, fault = "no positive slope", "no_slope"
     elif fit.r2 < MIN_R2:
-        reason = f"{POOR_FIT} (R^2 = {fit.r2:.2f} < {MIN_R2})"
+        reason, fault = f"poor linear fit (R^2 = {fit.r2:.2f} < {MIN_R2})", "poor_fit"
     if fit is None:
-        return FieldFit(float("nan"), float("nan"), float("nan"), usable=False, reason=reason or "no fit", **base)
+        return FieldFit(float("nan"), float("nan"), float("nan"), usable=False, reason=reason or "no fit",
+                        fault=fault or "no_fit", **base)
     rms = float(np.sqrt(np.mean((fs[w] - fit.intercept - fit.slope * xs[w]) ** 2)))
     lo, hi = bootstrap_slope_interval(xs[w], fs[w], n_boot, seed) if not reason else (float("nan"), float("nan"))
     return FieldFit(fit.slope if not reason else float("nan"), fit.r2, rms, usable=not reason, reason=reason,
-                    se=fit.se, ci_low=lo, ci_high=hi, **base)
+                    fault=fault, se=fit.se, ci_low=lo, ci_high=hi, **base)
