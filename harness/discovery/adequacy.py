@@ -43,12 +43,19 @@ import numpy as np
 
 from ..model.effects import EffectSpec
 from .screenset import Anchored
-from .structure import _corr
 
 N_DRAWS = 2000
 #: the share of canes (rounded down) whose residual scatters most, left out of the pooled
 #: within-cane spreads :func:`within_dispersion` compares (see :func:`_trimmed_spreads`)
 TRIM_SHARE = 0.1
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    """Pearson r of two (n,) arrays; 0 where either is constant."""
+    a = a - a.mean()
+    b = b - b.mean()
+    den = np.sqrt((a @ a) * (b @ b))
+    return float(a @ b / den) if den > 0 else 0.0
 
 
 def _row_corr(a: np.ndarray, b: np.ndarray) -> np.ndarray:

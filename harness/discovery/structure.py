@@ -7,7 +7,10 @@ feature is split the same way and correlated with the matching part:
 * between: Pearson r of cane-mean residual on cane-mean feature; null by
   permuting the canes' means (canes are the independent units);
 * within: Pearson r of the deviations; null by permuting trials within each
-  cane (a cane's offset is never mistaken for a height effect).
+  cane (a cane's offset is never mistaken for a height effect); given the
+  model's geometry draws, a feature of the push point's place must also beat
+  the caliper line's own error, which moves a cane's pushes apart along it
+  (:func:`structure_tests`).
 
 p-values are Bonferroni-adjusted over all tests in the table. The share of
 the residual variance between canes is reported beside it.
@@ -34,6 +37,8 @@ import math
 import numpy as np
 import pandas as pd
 
+from .adequacy import _corr, within_trend_geometry
+
 N_PERM = 2000
 
 FEATURES = {
@@ -50,13 +55,9 @@ FEATURES = {
 
 #: features that describe a push point's place on its cane: tested within canes only
 WITHIN_ONLY = ("trial_no", "above_lowest_caliper_m", "curvature")
-
-
-def _corr(a: np.ndarray, b: np.ndarray) -> float:
-    a = a - a.mean()
-    b = b - b.mean()
-    den = np.sqrt((a @ a) * (b @ b))
-    return float(a @ b / den) if den > 0 else 0.0
+#: features of the trace, not of the push point's place: the caliper line's error does not move
+#: along them, and their within-cane rows keep the plain permutation null
+TRACE_FEATURES = ("curvature",)
 
 
 def _perm_corr(a: np.ndarray, b: np.ndarray, B: np.ndarray) -> tuple[float, float]:
@@ -69,10 +70,32 @@ def _perm_corr(a: np.ndarray, b: np.ndarray, B: np.ndarray) -> tuple[float, floa
 
 
 def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None = None, seed: int = 0,
-                    n_perm: int = N_PERM) -> pd.DataFrame:
-    """One row per (feature, level): correlation, permutation p, Bonferroni-adjusted p."""
+                    n_perm: int = N_PERM, geometry: np.ndarray | None = None) -> pd.DataFrame:
+    """One row per (feature, level): correlation, p, Bonferroni-adjusted p.
+
+    Parameters
+    ----------
+    df : DataFrame
+        One row per trial: ``cane``, ``resid_col`` and the features.
+    geometry : array (draws, len(df)), optional
+        The model's change in ln k under the caliper line's own error
+        (:func:`.adequacy.geometry_draws`), row-aligned with ``df``. The line's slope error
+        moves a cane's low and high pushes apart, so under a correct model the residual trends
+        along each cane in the direction of every feature of the push point's place; a
+        within-cane permutation null cannot know that and flags it (an independent
+        generator's null: r = -0.54 with push height, permutation p = 0.0005, against this
+        null 0.004). Given the draws, such a row's ``p`` is the larger of the permutation's
+        (``p_permutation``) and that null's (:func:`.adequacy.within_trend_geometry`): each is
+        valid under its own null, so the larger is valid under both; the geometry null alone
+        takes trial noise as the same on every cane and flagged a trace feature, where a cane
+        or two scatter most, ten times below the permutation's p (r = 0.55, 0.0003 against
+        0.007). Trace features (:data:`TRACE_FEATURES`), which the line's error does not move
+        along, keep the permutation's. ``null`` says which ``p`` is.
+    """
     rng = np.random.default_rng(seed)
-    d = df[np.isfinite(df[resid_col])].copy()
+    keep = np.isfinite(df[resid_col].to_numpy(float))
+    d = df[keep].copy()
+    g = None if geometry is None else np.asarray(geometry, float)[:, keep]
     feats = [f for f in (features or list(FEATURES)) if f in d.columns and d[f].notna().all() and d[f].std() > 0]
     canes = d["cane"].to_numpy()
     uniq, inv = np.unique(canes, return_inverse=True)
@@ -97,7 +120,13 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
                 B = np.empty((n_perm, len(b)))
                 B[:, order] = b[idx]
             obs, p = _perm_corr(a, b, B)
-            rows.append({"feature": f, "level": level, "r": obs, "p": p, "what": FEATURES.get(f, f)})
+            row = {"feature": f, "level": level, "r": obs, "p": p, "what": FEATURES.get(f, f),
+                   "null": "cane permutation" if level == "between canes" else "permutation within canes",
+                   "p_permutation": p}
+            if level == "within canes" and g is not None and f not in TRACE_FEATURES:
+                row["p"] = max(p, within_trend_geometry(canes, r, x, g, seed=seed)["p"])
+                row["null"] = "permutation within canes and caliper-line error (the larger p)"
+            rows.append(row)
     out = pd.DataFrame(rows)
     if len(out):
         out["p_adj"] = np.minimum(1.0, out["p"] * len(out))

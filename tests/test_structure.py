@@ -1,0 +1,77 @@
+"""The structure table's within-cane rows against the caliper line's own error (discovery step 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from canebench.discovery.structure import structure_tests
+
+N_CANES = 18
+STEPS = np.array([0.0, 0.1, 0.2])  # three pushes 100 mm apart, as on the field rig
+
+
+def _trials(rng: np.random.Generator) -> pd.DataFrame:
+    base = rng.uniform(0.45, 0.9, N_CANES)
+    return pd.DataFrame({"cane": np.repeat([f"c{k:02d}" for k in range(N_CANES)], 3),
+                         "height_m": (base[:, None] + STEPS[None, :]).ravel()})
+
+
+def _line_error(rng: np.random.Generator, df: pd.DataFrame, n: int, slope_sd: float = 1.0) -> np.ndarray:
+    """(n, trials): each cane's ln k moved by its line's own error, a centroid shift plus a slope in
+    height (the slope's error extrapolated to the base moves a cane's low and high pushes apart)."""
+    canes, inv = np.unique(df.cane, return_inverse=True)
+    h = df.height_m.to_numpy()
+    hc = h - (np.bincount(inv, h) / np.bincount(inv))[inv]
+    centroid = rng.normal(0.0, 0.1, (n, len(canes)))[:, inv]
+    slope = rng.normal(0.0, slope_sd, (n, len(canes)))[:, inv]
+    return centroid + slope * hc
+
+
+def test_within_cane_rows_are_calibrated_against_the_caliper_lines_error():
+    """Under a correct model whose residual is the line's error plus trial noise, the
+    within-cane row must flag at about its level against the geometry null; a plain
+    permutation within canes flags far more often (its null has no room for a slope shared
+    by a cane's pushes: with 3 pushes a cane, var(r) is 1/canes under this error, against
+    1/(trials - canes) under permutation, so about 17 % of such nulls fall below p = 0.05).
+    The bound below is 0.05 plus three binomial standard deviations over the replicates."""
+    rng = np.random.default_rng(11)
+    reps, alpha = 300, 0.05
+    flags_geom = flags_perm = 0
+    for i in range(reps):
+        df = _trials(rng)
+        draws = _line_error(rng, df, 300)
+        df["r"] = -_line_error(rng, df, 1)[0] + rng.normal(0.0, 0.01, len(df))
+        row = structure_tests(df, "r", features=["height_m"], seed=i, n_perm=300, geometry=draws)
+        w = row[row.level == "within canes"].iloc[0]
+        assert "caliper-line error" in w["null"]
+        flags_geom += w.p < alpha
+        flags_perm += w.p_permutation < alpha
+    bound = alpha + 3.0 * np.sqrt(alpha * (1 - alpha) / reps)
+    assert flags_geom / reps <= bound, (flags_geom, flags_perm)
+    # the plain null's excess, which is why the rows take the geometry's (expected ~0.17)
+    assert flags_perm / reps >= 0.10, (flags_geom, flags_perm)
+
+
+def test_a_trend_along_every_cane_beyond_the_line_error_still_shows():
+    """A shared trend with push height on top of the line's error (an effect acting on part of
+    each cane) is found against the geometry null: 1.0 in ln k per metre against line slopes
+    that scatter 0.5 per metre from cane to cane."""
+    rng = np.random.default_rng(5)
+    df = _trials(rng)
+    draws = _line_error(rng, df, 1000, slope_sd=0.5)
+    h = df.height_m.to_numpy()
+    hc = h - df.groupby("cane").height_m.transform("mean").to_numpy()
+    df["r"] = -_line_error(rng, df, 1, slope_sd=0.5)[0] + 1.0 * hc + rng.normal(0.0, 0.01, len(df))
+    out = structure_tests(df, "r", features=["height_m"], seed=0, geometry=draws)
+    w = out[out.level == "within canes"].iloc[0]
+    assert w.r > 0.5 and w.p < 0.002, w.to_dict()
+    # a trace feature keeps the permutation's null: the line's error does not move along it
+    df["curvature"] = rng.normal(0.0, 1.0, len(df))
+    both = structure_tests(df, "r", features=["height_m", "curvature"], seed=0, geometry=draws)
+    cw = both[(both.level == "within canes") & (both.feature == "curvature")].iloc[0]
+    assert cw.null == "permutation within canes" and cw.p == cw.p_permutation
+    # without the draws the row is the permutation's, as before
+    plain = structure_tests(df, "r", features=["height_m"], seed=0)
+    pw = plain[plain.level == "within canes"].iloc[0]
+    assert pw.null == "permutation within canes" and pw.p == pw.p_permutation
