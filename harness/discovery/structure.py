@@ -1,4 +1,4 @@
-"""Which trial features carry the residual, and how strongly (permutation tests grouped by cane).
+"""Which trial features carry the residual, and how strongly (tests grouped by cane).
 
 A residual r (ln k_sim/k_field or after an effect) is split into its cane
 means (between canes) and the deviations from them (within canes). Each
@@ -8,9 +8,8 @@ feature is split the same way and correlated with the matching part:
   permuting the canes' means (canes are the independent units);
 * within: Pearson r of the deviations; null by permuting trials within each
   cane (a cane's offset is never mistaken for a height effect); given the
-  model's geometry draws, a feature of the push point's place must also beat
-  the caliper line's own error, which moves a cane's pushes apart along it
-  (:func:`structure_tests`).
+  model's geometry draws, a row must also beat the caliper line's own error,
+  which moves a cane's pushes apart along it (:func:`structure_tests`).
 
 p-values are Bonferroni-adjusted over all tests in the table. The share of
 the residual variance between canes is reported beside it.
@@ -53,11 +52,9 @@ FEATURES = {
 }
 
 
-#: features that describe a push point's place on its cane: tested within canes only
+#: features tested within canes only: their cane means differ only through missing trials (the
+#: push point's place) or carry nothing between canes (the trace's curvature)
 WITHIN_ONLY = ("trial_no", "above_lowest_caliper_m", "curvature")
-#: features of the trace, not of the push point's place: the caliper line's error does not move
-#: along them, and their within-cane rows keep the plain permutation null
-TRACE_FEATURES = ("curvature",)
 
 
 def _perm_corr(a: np.ndarray, b: np.ndarray, B: np.ndarray) -> tuple[float, float]:
@@ -81,21 +78,27 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
         The model's change in ln k under the caliper line's own error
         (:func:`.adequacy.geometry_draws`), row-aligned with ``df``. The line's slope error
         moves a cane's low and high pushes apart, so under a correct model the residual trends
-        along each cane in the direction of every feature of the push point's place; a
-        within-cane permutation null cannot know that and flags it (an independent
-        generator's null: r = -0.54 with push height, permutation p = 0.0005, against this
-        null 0.004). Given the draws, such a row's ``p`` is the larger of the permutation's
-        (``p_permutation``) and that null's (:func:`.adequacy.within_trend_geometry`): each is
-        valid under its own null, so the larger is valid under both; the geometry null alone
-        takes trial noise as the same on every cane and flagged a trace feature, where a cane
-        or two scatter most, ten times below the permutation's p (r = 0.55, 0.0003 against
-        0.007). Trace features (:data:`TRACE_FEATURES`), which the line's error does not move
-        along, keep the permutation's. ``null`` says which ``p`` is.
+        along each cane, and with every feature that varies along it (push height, and a
+        trace's curvature where it changes with height); a within-cane permutation null cannot
+        know that and flags it (an independent generator's null: r = -0.54 with push height,
+        permutation p = 0.0005, against this null 0.004). Given the draws, every within-cane
+        row's ``p`` is the larger of the permutation's (``p_permutation``) and that null's
+        (:func:`.adequacy.within_trend_geometry`, which holds the feature fixed): valid under
+        either null. The geometry null alone takes trial noise as the same on every cane and,
+        where a cane or two scatter most, put a trace feature ten times below the permutation's
+        p (r = 0.55, 0.0003 against 0.007); the permutation keeps that honest. ``null`` says
+        which ``p`` is. The within-cane ``log_k_field`` row stays biased toward a positive r
+        under both (the field's ln k contains the residual).
     """
     rng = np.random.default_rng(seed)
     keep = np.isfinite(df[resid_col].to_numpy(float))
     d = df[keep].copy()
-    g = None if geometry is None else np.asarray(geometry, float)[:, keep]
+    g = None
+    if geometry is not None:
+        g = np.asarray(geometry, float)
+        if g.ndim != 2 or g.shape[1] != len(df):
+            raise ValueError(f"geometry draws have shape {g.shape}; expected (draws, {len(df)}), one column per trial")
+        g = g[:, keep]
     feats = [f for f in (features or list(FEATURES)) if f in d.columns and d[f].notna().all() and d[f].std() > 0]
     canes = d["cane"].to_numpy()
     uniq, inv = np.unique(canes, return_inverse=True)
@@ -123,7 +126,7 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
             row = {"feature": f, "level": level, "r": obs, "p": p, "what": FEATURES.get(f, f),
                    "null": "cane permutation" if level == "between canes" else "permutation within canes",
                    "p_permutation": p}
-            if level == "within canes" and g is not None and f not in TRACE_FEATURES:
+            if level == "within canes" and g is not None:
                 row["p"] = max(p, within_trend_geometry(canes, r, x, g, seed=seed)["p"])
                 row["null"] = "permutation within canes and caliper-line error (the larger p)"
             rows.append(row)

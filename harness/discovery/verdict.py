@@ -84,10 +84,8 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     ``alpha`` (:func:`.engine_runs.model_shape_check`).
     Notes are appended to ``notes``, durations to ``timing``.
     """
-    # adequacy: a model that fits the mean but not how stiffness scales across canes is incomplete,
-    # whatever it named. The structure table's Bonferroni family (13 tests) is too wide to see this
-    # one trend, and its stiffness-level feature is the field's, which contains the residual itself.
-    # The null carries the caliper line's error, which level and residual share (.adequacy).
+    # the model's ln k under the caliper lines' own errors (.adequacy), for the structure table's
+    # within-cane rows and the adequacy checks
     canes_f = F.cane.to_numpy()
     g_before = geometry_draws(baseline, (), diameter_factor, seed=seed)
     g_after = geometry_draws(anchor, tuple(final.fit.specs), diameter_factor, seed=seed)
@@ -95,6 +93,10 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     sb = structure_tests(F, "r_before", seed=seed, geometry=g_before)
     sa = structure_tests(F, "r_after_cv", seed=seed, geometry=g_after)
     structured = bool(len(sa) and (sa.p_adj < STRUCTURE_ALPHA).any())
+    # adequacy: a model that fits the mean but not how stiffness scales across canes is incomplete,
+    # whatever it named. The structure table's Bonferroni family (13 tests) is too wide to see this
+    # one trend, and its stiffness-level feature is the field's, which contains the residual itself.
+    # The null carries the caliper line's error, which level and residual share (.adequacy).
     adequacy = {"test": "between-cane correlation of the held-out residual with the model's ln k, against "
                         "the caliper-fit geometry's shared error (parametric bootstrap, two-sided)",
                 "alpha": ADEQUACY_ALPHA,
