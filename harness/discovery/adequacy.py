@@ -208,9 +208,14 @@ def within_trend_geometry(canes: np.ndarray, resid: np.ndarray, position: np.nda
     if C < 4 or dfw < 4:  # as the level trend: too few canes to say anything
         return out
 
+    onehot = np.zeros((n, C))
+    onehot[np.arange(n), inv] = 1.0
+
     def within(a: np.ndarray) -> np.ndarray:  # deviations from each cane's mean (last axis: trials)
         a2 = np.atleast_2d(a)
-        means = np.stack([np.bincount(inv, row, minlength=C) for row in a2]) / cnt
+        # one product for every row (the null's copies are tens of thousands of rows, and the
+        # structure table calls this once per feature)
+        means = (a2 @ onehot) / cnt
         return (a2 - means[:, inv]).reshape(a.shape)
 
     rw, xw = within(resid), within(position)
