@@ -47,7 +47,10 @@ def figures(out: str | Path) -> list[Path]:
     fig.savefig(p, dpi=120)
     plt.close(fig)
     paths.append(p)
-    feats = ["height_m", "diameter_mm", "above_lowest_caliper_m", "log_k_field"]
+    # the level on the baseline's ln k, one x for both residuals (the field's ln k contains them)
+    if "k_base" in d:
+        d = d.assign(log_k_base=np.log(d.k_base.where(d.k_base > 0)))
+    feats = ["height_m", "diameter_mm", "above_lowest_caliper_m", "log_k_base"]
     fig, axes = plt.subplots(1, len(feats), figsize=(12, 3), sharey=True)
     for ax, f in zip(axes, feats):
         if f in d:

@@ -80,3 +80,38 @@ def test_a_trend_along_every_cane_beyond_the_line_error_still_shows():
     plain = structure_tests(df, "r", features=["height_m"], seed=0)
     pw = plain[plain.level == "within canes"].iloc[0]
     assert pw.null == "permutation within canes" and pw.p == pw.p_permutation
+
+
+def test_the_level_row_is_the_models_own_stiffness_not_the_fields():
+    """The stiffness-level row correlates the residual with the model's own ln k. The field's
+    ln k is the model's plus the residual, so under a correct model it correlates with the
+    residual by construction: here within canes, where a cane's three pushes differ by about
+    0.1 in ln k and trial noise is 0.05, r is about +0.5 and that row flags nearly every null.
+    The model's level flags at its level (the bound: 0.05 plus three binomial standard
+    deviations over the replicates), between and within canes."""
+    rng = np.random.default_rng(3)
+    reps, alpha = 200, 0.05
+    flags = {"between canes": 0, "within canes": 0}
+    flags_field = 0
+    for i in range(reps):
+        df = _trials(rng)
+        cane_level = rng.normal(-1.5, 1.0, N_CANES)  # thin and thick canes
+        lk_model = np.repeat(cane_level, 3) - 1.0 * df.height_m.to_numpy()  # softer higher up
+        offset = np.repeat(rng.normal(0.0, 0.15, N_CANES), 3)  # each cane's own modulus
+        df["r"] = offset + rng.normal(0.0, 0.05, len(df))
+        df["lk_model"] = lk_model
+        df["lk_field"] = lk_model + df.r
+        out = structure_tests(df, "r", features=["log_k_model", "lk_field"], seed=i, n_perm=300,
+                              level_col="lk_model")
+        for level in flags:
+            row = out[(out.feature == "log_k_model") & (out.level == level)].iloc[0]
+            flags[level] += row.p < alpha
+        flags_field += out[(out.feature == "lk_field") & (out.level == "within canes")].iloc[0].p < alpha
+    bound = alpha + 3.0 * np.sqrt(alpha * (1 - alpha) / reps)
+    rates = ", ".join(f"{k} {v / reps:.3f}" for k, v in flags.items())
+    print(f"share of nulls below {alpha}: model's level {rates}; field's level within canes {flags_field / reps:.3f}")
+    assert all(v / reps <= bound for v in flags.values()), (flags, flags_field)
+    assert flags_field / reps >= 0.5, (flags, flags_field)
+    # the row is the caller's level only: a column of that name in the table is not taken for it
+    df["log_k_model"] = df.r
+    assert "log_k_model" not in set(structure_tests(df, "r", seed=0, n_perm=100).feature)

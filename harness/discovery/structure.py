@@ -36,7 +36,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from .adequacy import _corr, within_trend_geometry
+from .adequacy import _corr, level_trend_geometry, within_trend_geometry
 
 N_PERM = 2000
 
@@ -46,7 +46,7 @@ FEATURES = {
     "rel_push": "push arc length / cane length",
     "diameter_mm": "diameter at the push point (caliper fit)",
     "above_lowest_caliper_m": "arc length from the lowest caliper up to the push point",
-    "log_k_field": "stiffness level (ln k_field)",
+    "log_k_model": "stiffness level (the model's own ln k; the field's would contain the residual)",
     "curvature": "trace curvature: slope of the second half / first half of contact",
     "trial_no": "position of the push point on the cane (1 = highest)",
 }
@@ -67,7 +67,8 @@ def _perm_corr(a: np.ndarray, b: np.ndarray, B: np.ndarray) -> tuple[float, floa
 
 
 def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None = None, seed: int = 0,
-                    n_perm: int = N_PERM, geometry: np.ndarray | None = None) -> pd.DataFrame:
+                    n_perm: int = N_PERM, geometry: np.ndarray | None = None,
+                    level_col: str | None = None) -> pd.DataFrame:
     """One row per (feature, level): correlation, p, Bonferroni-adjusted p.
 
     Parameters
@@ -87,12 +88,22 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
         either null. The geometry null alone takes trial noise as the same on every cane and,
         where a cane or two scatter most, put a trace feature ten times below the permutation's
         p (r = 0.55, 0.0003 against 0.007); the permutation keeps that honest. ``null`` says
-        which ``p`` is. The within-cane ``log_k_field`` row stays biased toward a positive r
-        under both (the field's ln k contains the residual).
+        which ``p`` is.
+    level_col : str, optional
+        Column of ``df`` with the model's own ln k for the residual in ``resid_col`` (the
+        baseline's for the residual before, the held-out prediction after): the stiffness-level
+        row ``log_k_model``, left out without it. Not the field's ln k: it contains the
+        residual, so under any null the two correlate (a cane measuring stiff has both a high
+        level and a high residual). The model's level shares the caliper line's error with the
+        residual instead, so given ``geometry`` its between-cane row also takes the larger of
+        the permutation's p and :func:`.adequacy.level_trend_geometry`'s.
     """
     rng = np.random.default_rng(seed)
     keep = np.isfinite(df[resid_col].to_numpy(float))
     d = df[keep].copy()
+    d = d.drop(columns=["log_k_model"], errors="ignore")  # only ever the level the caller names
+    if level_col is not None:
+        d["log_k_model"] = d[level_col].to_numpy(float)
     g = None
     if geometry is not None:
         g = np.asarray(geometry, float)
@@ -129,6 +140,9 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
             if level == "within canes" and g is not None:
                 row["p"] = max(p, within_trend_geometry(canes, r, x, g, seed=seed)["p"])
                 row["null"] = "permutation within canes and caliper-line error (the larger p)"
+            elif f == "log_k_model" and g is not None:  # the level moves with the line's error too
+                row["p"] = max(p, level_trend_geometry(canes, r, x, g, seed=seed)["p"])
+                row["null"] = "cane permutation and caliper-line error (the larger p)"
             rows.append(row)
     out = pd.DataFrame(rows)
     if len(out):

@@ -90,12 +90,12 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     g_before = geometry_draws(baseline, (), diameter_factor, seed=seed)
     g_after = geometry_draws(anchor, tuple(final.fit.specs), diameter_factor, seed=seed)
     # -- structure before and after: within canes against the same geometry null as the checks
-    sb = structure_tests(F, "r_before", seed=seed, geometry=g_before)
-    sa = structure_tests(F, "r_after_cv", seed=seed, geometry=g_after)
+    sb = structure_tests(F, "r_before", seed=seed, geometry=g_before, level_col="log_k_base")
+    sa = structure_tests(F, "r_after_cv", seed=seed, geometry=g_after, level_col="log_k_model_cv")
     structured = bool(len(sa) and (sa.p_adj < STRUCTURE_ALPHA).any())
     # adequacy: a model that fits the mean but not how stiffness scales across canes is incomplete,
     # whatever it named. The structure table's Bonferroni family (13 tests) is too wide to see this
-    # one trend, and its stiffness-level feature is the field's, which contains the residual itself.
+    # one pre-declared trend (the table's own level row is the same r, judged at 0.01 over 13).
     # The null carries the caliper line's error, which level and residual share (.adequacy).
     adequacy = {"test": "between-cane correlation of the held-out residual with the model's ln k, against "
                         "the caliper-fit geometry's shared error (parametric bootstrap, two-sided)",
