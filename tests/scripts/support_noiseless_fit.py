@@ -51,11 +51,12 @@ for names in CANDIDATES:
     params = "; ".join(f"{s.name} " + ", ".join(f"{k} {v:.4g}" for k, v in s.params) for s in f.specs)
     print(f"{' + '.join(names):38s} left: rms {np.sqrt(np.mean(r ** 2)):.3f}, between canes "
           f"{np.sqrt(np.mean(cm ** 2)):.3f}, within {np.sqrt(np.mean((r - cm) ** 2)):.3f}  ({params})")
-r = fits[("root_compliance", "base_flare")]
+best = min(fits, key=lambda k: float(np.mean(fits[k] ** 2)))
+r = fits[best]
 df = pd.DataFrame({"cane": canes, "left": r, "effect": y, "diameter_mm": [t.diameter_mm for t in trials],
                    "height_mm": [t.height_mm for t in trials]})
 cm = df.groupby("cane").mean()
-print("\nroot + flare, per cane (means over its pushes):")
+print(f"\nwhat the best fit ({' + '.join(best)}) leaves, per cane (means over its pushes):")
 print(cm.round(3).to_string())
 for c in ("effect", "diameter_mm", "height_mm"):
     print(f"between-cane r of what is left with {c}: {np.corrcoef(cm.left, cm[c])[0, 1]:+.2f}")
