@@ -1,6 +1,6 @@
 """Which trial features carry the residual, and how strongly (tests grouped by cane).
 
-A residual r (ln k_sim/k_field or after an effect) is split into its cane
+A residual r (ln k_field/k_model, before or after an effect) is split into its cane
 means (between canes) and the deviations from them (within canes). Each
 feature is split the same way and correlated with the matching part:
 
@@ -55,6 +55,10 @@ FEATURES = {
 #: features tested within canes only: their cane means differ only through missing trials (the
 #: push point's place) or carry nothing between canes (the trace's curvature)
 WITHIN_ONLY = ("trial_no", "above_lowest_caliper_m", "curvature")
+#: features tested between canes only: within a cane the model's level is a function of push
+#: height (tested), and it moves with the caliper line's slope error exactly as the residual moves
+#: against it, a negative r under any null that the within-cane nulls (feature held fixed) miss
+BETWEEN_ONLY = ("log_k_model",)
 
 
 def _perm_corr(a: np.ndarray, b: np.ndarray, B: np.ndarray) -> tuple[float, float]:
@@ -92,18 +96,23 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
     level_col : str, optional
         Column of ``df`` with the model's own ln k for the residual in ``resid_col`` (the
         baseline's for the residual before, the held-out prediction after): the stiffness-level
-        row ``log_k_model``, left out without it. Not the field's ln k: it contains the
-        residual, so under any null the two correlate (a cane measuring stiff has both a high
-        level and a high residual). The model's level shares the caliper line's error with the
-        residual instead, so given ``geometry`` its between-cane row also takes the larger of
-        the permutation's p and :func:`.adequacy.level_trend_geometry`'s.
+        row ``log_k_model``, between canes only (:data:`BETWEEN_ONLY`), left out without it.
+        Not the field's ln k: it contains the residual, so under any null the two correlate
+        (a cane measuring stiff has both a high level and a high residual). The model's level
+        shares the caliper line's error with the residual instead, so given ``geometry`` its
+        row also takes the larger of the permutation's p and
+        :func:`.adequacy.level_trend_geometry`'s.
     """
     rng = np.random.default_rng(seed)
     keep = np.isfinite(df[resid_col].to_numpy(float))
     d = df[keep].copy()
+    level = d[level_col].to_numpy(float) if level_col is not None else None
     d = d.drop(columns=["log_k_model"], errors="ignore")  # only ever the level the caller names
-    if level_col is not None:
-        d["log_k_model"] = d[level_col].to_numpy(float)
+    if level is not None:
+        if not np.all(np.isfinite(level)):
+            raise ValueError(f"level column {level_col!r} is not finite on every trial with a residual "
+                             f"({resid_col!r}): the level row would be dropped")
+        d["log_k_model"] = level
     g = None
     if geometry is not None:
         g = np.asarray(geometry, float)
@@ -122,8 +131,8 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
         xm = np.bincount(inv, x) / np.bincount(inv)
         xw = x - xm[inv]
         for level, (a, b) in (("between canes", (rm, xm)), ("within canes", (rw, xw))):
-            if level == "between canes" and f in WITHIN_ONLY:
-                continue  # their cane means differ only through missing trials
+            if (level == "between canes" and f in WITHIN_ONLY) or (level == "within canes" and f in BETWEEN_ONLY):
+                continue
             if np.std(b) == 0 or np.std(a) == 0:
                 continue
             if level == "between canes":

@@ -77,7 +77,8 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
           timing: dict[str, float], seed: int = 0) -> Verdict:
     """Run the checks on the selection's model (``final``, cross-validated; ``current`` its effects).
 
-    ``F`` holds the scored trials (``cane``, ``height_m``, the residuals and ``log_k_model_cv``);
+    ``F`` holds the scored trials (``cane``, ``height_m``, the residuals, ``log_k_base`` and
+    ``log_k_model_cv``: the levels the structure table's level row takes before and after);
     ``r_before``/``r_after`` are the baseline's and the model's held-out residuals; ``baseline``
     the screen at the baseline's ln k, ``anchor`` at the last anchor (:class:`.screenset.Anchored`).
     ``shape_of(specs, alpha)`` runs the traces' shape check of a model on the engine at level
@@ -94,8 +95,8 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     sa = structure_tests(F, "r_after_cv", seed=seed, geometry=g_after, level_col="log_k_model_cv")
     structured = bool(len(sa) and (sa.p_adj < STRUCTURE_ALPHA).any())
     # adequacy: a model that fits the mean but not how stiffness scales across canes is incomplete,
-    # whatever it named. The structure table's Bonferroni family (13 tests) is too wide to see this
-    # one pre-declared trend (the table's own level row is the same r, judged at 0.01 over 13).
+    # whatever it named. The structure table's Bonferroni family (12 tests) is too wide to see this
+    # one pre-declared trend (the table's own level row is the same r, judged at 0.01 over 12).
     # The null carries the caliper line's error, which level and residual share (.adequacy).
     adequacy = {"test": "between-cane correlation of the held-out residual with the model's ln k, against "
                         "the caliper-fit geometry's shared error (parametric bootstrap, two-sided)",
