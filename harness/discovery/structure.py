@@ -106,13 +106,13 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
     rng = np.random.default_rng(seed)
     keep = np.isfinite(df[resid_col].to_numpy(float))
     d = df[keep].copy()
-    level = d[level_col].to_numpy(float) if level_col is not None else None
+    model_level = d[level_col].to_numpy(float) if level_col is not None else None
     d = d.drop(columns=["log_k_model"], errors="ignore")  # only ever the level the caller names
-    if level is not None:
-        if not np.all(np.isfinite(level)):
+    if model_level is not None:
+        if not np.all(np.isfinite(model_level)):
             raise ValueError(f"level column {level_col!r} is not finite on every trial with a residual "
                              f"({resid_col!r}): the level row would be dropped")
-        d["log_k_model"] = level
+        d["log_k_model"] = model_level
     g = None
     if geometry is not None:
         g = np.asarray(geometry, float)
