@@ -122,13 +122,15 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
     feats = [f for f in (features or list(FEATURES)) if f in d.columns and d[f].notna().all() and d[f].std() > 0]
     canes = d["cane"].to_numpy()
     uniq, inv = np.unique(canes, return_inverse=True)
+    cnt = np.bincount(inv)
+    order = np.argsort(inv, kind="stable")  # trials grouped by cane, for the within-cane shuffles
     r = d[resid_col].to_numpy(float)
-    rm = np.bincount(inv, r) / np.bincount(inv)
+    rm = np.bincount(inv, r) / cnt
     rw = r - rm[inv]
     rows = []
     for f in feats:
         x = d[f].to_numpy(float)
-        xm = np.bincount(inv, x) / np.bincount(inv)
+        xm = np.bincount(inv, x) / cnt
         xw = x - xm[inv]
         for level, (a, b) in (("between canes", (rm, xm)), ("within canes", (rw, xw))):
             if (level == "between canes" and f in WITHIN_ONLY) or (level == "within canes" and f in BETWEEN_ONLY):
@@ -138,7 +140,6 @@ def structure_tests(df: pd.DataFrame, resid_col: str, features: list[str] | None
             if level == "between canes":
                 B = np.stack([rng.permutation(b) for _ in range(n_perm)])
             else:  # shuffle within each cane: sort by (cane, random key)
-                order = np.argsort(inv, kind="stable")
                 idx = np.argsort(inv[None, :] * 10.0 + rng.random((n_perm, len(b))), axis=1)
                 B = np.empty((n_perm, len(b)))
                 B[:, order] = b[idx]
