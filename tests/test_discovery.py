@@ -1125,6 +1125,21 @@ def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their
     assert by["modulus_scale"]["covers_null"] == [] and by["modulus_scale"]["dropped_with"] == "root_compliance"
     assert steps[0]["removed"] == "modulus_scale+root_compliance"
 
+    # the same pair where the scale passed alone at that step (selection.entry_groups): the root
+    # goes by itself and the scale stays, refitted and re-anchored
+    (current, cv, at_out, ci, unsupported, stale), steps, _ = run(
+        ("modulus_scale", "root_compliance"), (("modulus_scale", "root_compliance"), ("root_compliance",)),
+        {("root_compliance", "k_root"): (60.0, root_high)})
+    assert current == ("modulus_scale",) and stale == [] and calls == [("modulus_scale",)]
+    assert [u["effect"] for u in unsupported] == ["root_compliance"] and "dropped_with" not in unsupported[0]
+    assert steps[0]["removed"] == "root_compliance"
+    # and the other way: the scale (which passed alone) reaching its null takes the root with it
+    (current, cv, at_out, ci, unsupported, stale), steps, _ = run(
+        ("modulus_scale", "root_compliance"), (("modulus_scale", "root_compliance"), ("root_compliance",)),
+        {("modulus_scale", "scale"): (0.95, 2.0)})
+    assert current == () and {u["effect"]: u.get("dropped_with") for u in unsupported} == {
+        "modulus_scale": None, "root_compliance": "modulus_scale"}
+
     # both reach their null in the marginal intervals: one goes, the other is tight alone and stays
     (current, cv, _, ci, unsupported, stale), steps, cv0 = run(
         ("modulus_scale", "root_compliance"), (("modulus_scale",), ("root_compliance",)),
@@ -1795,3 +1810,29 @@ def test_an_elbow_that_spoils_the_line_is_found_and_scored_up_to_it():
     assert not flat.usable and not flat.only_poorly_linear
     fields = {"t": SimpleNamespace(fit=before, reason=""), "n": SimpleNamespace(fit=ff, reason=ff.reason)}
     assert unscored_onsets({"t": 30.0, "n": 30.0, "gone": 9.0}, fields) == {"n": ff.reason, "gone": "no field fit"}
+
+
+def test_a_pair_member_that_passed_alone_is_not_dropped_with_its_partner():
+    """entry_groups records a pair so that drop_unsupported takes a member that failed the step
+    alone with its partner, but not one that passed alone (the pair was preferred for its BIC)."""
+    from canebench.discovery.selection import entry_groups
+
+    assert entry_groups(("modulus_scale",), set()) == [("modulus_scale",)]
+    assert entry_groups(("modulus_scale", "root_compliance"), set()) == [("modulus_scale", "root_compliance")]
+    assert entry_groups(("modulus_scale", "root_compliance"), {"base_flare"}) == [("modulus_scale", "root_compliance")]
+    assert entry_groups(("modulus_scale", "root_compliance"), {"modulus_scale"}) == [
+        ("modulus_scale", "root_compliance"), ("root_compliance",)]
+    assert entry_groups(("modulus_scale", "root_compliance"), {"modulus_scale", "root_compliance"}) == [
+        ("modulus_scale",), ("root_compliance",)]
+
+
+def test_only_an_unnamed_flare_may_take_a_trend_along_the_canes():
+    """verdict.within_takers: a spring or a scale the selection did not name may not keep the names
+    standing by taking the within-cane trend (a trellis tie was taken by a rig spring and kept a
+    misnamed scale standing); only an unnamed flare, and not one just refused for its interval."""
+    from canebench.discovery.verdict import within_takers
+
+    lib = ("modulus_scale", "root_compliance", "rig_compliance", "base_flare", "probe_misalignment", "obstruction")
+    assert within_takers(lib, ("modulus_scale",), []) == ("base_flare",)
+    assert within_takers(lib, ("modulus_scale", "base_flare"), []) == ()
+    assert within_takers(lib, ("modulus_scale",), [{"effect": "base_flare"}]) == ()

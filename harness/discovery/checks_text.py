@@ -51,7 +51,7 @@ def adequacy_lines(doc: dict[str, Any]) -> list[str]:
                      f"{tk['p']:.2g}" + (f"; {', '.join(tk['at_bound'])} at its search bound" if tk.get("at_bound")
                                          else "") + "): the names stand, flagged unexplained")
         elif "within_tried" in ad:
-            taken = "; taken by no unnamed library effect added beside the named ones: the names are withheld"
+            taken = "; not taken by an unnamed flare added beside the named ones: the names are withheld"
         lines.append(f"within canes (held-out residual against push height along each cane, {wa['n_canes']} canes; "
                      f"null: trial noise and the caliper line's error): r = {wb.get('r', NAN):.2f} (p = "
                      f"{wb.get('p', NAN):.2g}) before, r = {wa['r']:.2f} (null spread +-{2 * wa['null_sd']:.2f}, "

@@ -46,7 +46,7 @@ class Selection:
     cv: Any  # the model cross-validated (:func:`.fit.cross_validate`)
     at: Anchored  # the screen, anchored on the engine's run of the model
     steps: list[dict[str, Any]]  # one row per candidate tried and per effect dropped
-    entered: list[tuple[str, ...]]  # the effects as they entered the model (a pair together)
+    entered: list[tuple[str, ...]]  # the effects as they entered the model, grouped by entry_groups
     removed: list[str]  # named, then found stale by the backward pass
     stop: str  # why the search stopped
     #: the single effect too small to name that fitted better than every one that passed, where that
@@ -70,7 +70,7 @@ def forward_select(candidates: tuple[str, ...], at: Anchored, lkf: np.ndarray,
     """
     current: tuple[str, ...] = ()
     removed: list[str] = []  # named, then found stale by the backward pass
-    entered: list[tuple[str, ...]] = []  # the effects as they entered the model (a pair together)
+    entered: list[tuple[str, ...]] = []  # the effects as they entered the model (entry_groups)
     # models the search has held: a forward step may not return to one, so an effect dropped as
     # stale can re-enter only beside a new partner, and the search terminates
     visited: set[frozenset[str]] = {frozenset()}
@@ -190,7 +190,9 @@ def forward_select(candidates: tuple[str, ...], at: Anchored, lkf: np.ndarray,
         if ok:
             current = current + best["add"]
             visited.add(frozenset(current))
-            entered.append(best["add"])
+            # (the singles still in ``ok``: where a single too small to name outranked every one
+            # that passed, ``ok`` held none of them)
+            entered.extend(entry_groups(best["add"], {t["add"][0] for t in ok if len(t["add"]) == 1}))
             cv_cur = best["cv"]
             at, cv_cur = reanchor(at, cv_cur)
             current, cv_cur, at, dropped = backward(current, best["add"], cv_cur, at, lkf, min_change, reanchor,
@@ -305,7 +307,8 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
     Where several reach it, the one whose removal (the others refitted) changes the model least
     goes first, and the intervals are drawn again: two effects traded against each other can each
     reach their null in the marginal intervals while either alone is tight. An effect that
-    entered beside it as a pair goes with it (it failed alone, and the pair no longer stands);
+    entered beside it as a pair and failed alone goes with it (the pair no longer stands; one that
+    passed alone at that step stays, :func:`entry_groups`);
     then the backward pass (:func:`backward`) drops what has gone stale. The rest are refitted and
     re-anchored (``reanchor``); with nothing left, the screen and anchor are the empty model's
     (``empty``) as they were before the selection. Nothing takes a dropped effect's place.
@@ -318,8 +321,10 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
         partner, whose ``dropped_with`` names the effect it entered beside); ``stale``: the
         effects the backward pass then dropped.
 
-    ``entered`` holds the groups the model's effects entered in (a pair together), without any
-    dropped since as stale: an effect can re-enter beside a new partner.
+    ``entered`` holds the groups the model's effects entered in (:func:`entry_groups`: a pair
+    together, and a member of it that failed alone also by itself), without any dropped since as
+    stale: an effect can re-enter beside a new partner. The last group holding an effect decides
+    what goes with it.
     """
     unsupported: list[dict[str, Any]] = []
     stale: list[str] = []
@@ -369,6 +374,28 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
             groups = _prune(groups, tuple(dropped))
         ci = draw_ci(cv_cur.fit, at) if current else {}
     return current, cv_cur, at, ci, unsupported, stale
+
+
+def entry_groups(add: tuple[str, ...], passed_alone: set[str]) -> list[tuple[str, ...]]:
+    """How effects that entered together are recorded for :func:`drop_unsupported`.
+
+    A pair's member that failed the step's rules alone stands only beside its partner, and goes
+    when the partner's interval reaches no effect; one that passed them alone at the same step
+    (the pair was preferred for its BIC) stands by itself. The groups are read last first, so a
+    member that failed alone, ``b`` beside ``a`` which passed, is recorded as ``(a, b), (b,)``:
+    ``b`` going leaves ``a``, ``a`` going takes ``b``. (An independent generator's modulus scale
+    of 1.48 passed alone beside a flare, entered as a pair with a root whose interval then
+    reached no effect, and went with it, leaving the flare misnamed: docs/discovery.md.)
+    """
+    if len(add) < 2:
+        return [tuple(add)]
+    alone = [c for c in add if c in passed_alone]
+    failed = tuple(c for c in add if c not in passed_alone)
+    if not alone:
+        return [tuple(add)]
+    if not failed:
+        return [(c,) for c in add]
+    return [tuple(add), failed]
 
 
 def _prune(groups: Any, names: tuple[str, ...]) -> list[tuple[str, ...]]:

@@ -22,9 +22,17 @@ from .checks_text import failure_reasons
 from .fit import Candidate, cross_validate
 from .nulls import at_bound, null_bound
 from .screenset import Anchored
-from .structure import level_trend, structure_tests
+from .structure import level_trend, structure_flags, structure_tests
 
 STRUCTURE_ALPHA = 0.01  # Bonferroni-adjusted p below which residual structure counts as unexplained
+#: the unnamed effects that may take a trend along the canes and keep the names standing
+#: (:func:`within_taken_by`): the exemption is for a taper fuller or leaner below the calipers than
+#: their line, which is a flare. A spring or a scale that the selection did not name taking the
+#: trend is not that story: a fifth generator's trellis tie above the top push (an effect outside
+#: the library, the top pushes stiffened most) was taken by a rig spring of 2445 N/m and kept a
+#: misnamed modulus scale of 1.70 standing; no other stored result of the self-test (seeds 7-9) or
+#: of the fourth and fifth generators had a taker (``tests/scripts/verdict_paths.py``).
+WITHIN_TAKERS = ("base_flare",)
 #: level of the adequacy check (:func:`.adequacy.level_trend_geometry`: held-out residual against the
 #: model's held-out stiffness level, between canes, against a null that carries the caliper-fit
 #: geometry's shared error), one pre-declared test beside the structure table's family. Failing it
@@ -93,7 +101,7 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     # -- structure before and after: within canes against the same geometry null as the checks
     sb = structure_tests(F, "r_before", seed=seed, geometry=g_before, level_col="log_k_base")
     sa = structure_tests(F, "r_after_cv", seed=seed, geometry=g_after, level_col="log_k_model_cv")
-    structured = bool(len(sa) and (sa.p_adj < STRUCTURE_ALPHA).any())
+    structured = bool(len(structure_flags(sa, STRUCTURE_ALPHA)))  # the curvature row reports only
     # adequacy: a model that fits the mean but not how stiffness scales across canes is incomplete,
     # whatever it named. The structure table's Bonferroni family (12 tests) is too wide to see this
     # one pre-declared trend (the table's own level row is the same r, judged at 0.01 over 12).
@@ -133,13 +141,10 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
                      f"{adequacy['shape']['p_floor']:.2g}, so it cannot withhold a name at {ADEQUACY_ALPHA}")
     if within_fails and not (trend_fails or shape_fails or dispersion_fails or shape_level_fails) and current:
         # the trend along the canes would be the only reason to withhold the names: if an unnamed
-        # library effect takes it, it is that effect below the naming rules (a taper fuller or
-        # leaner below the calipers than their line is a flare), not one outside the library
+        # flare takes it, it is a taper fuller or leaner below the calipers than their line, below
+        # the naming rules, not an effect outside the library (WITHIN_TAKERS)
         t_w = time.perf_counter()
-        # (not an effect just refused for its interval: it would be named back by the side door)
-        refused = {u["effect"] for u in unsupported}
-        taken, tried = within_taken_by(tuple(c for c in candidates if c not in current and c != "obstruction"
-                                             and c not in refused),
+        taken, tried = within_taken_by(within_takers(candidates, current, unsupported),
                                        current, anchor, lkf, canes_f, height, diameter_factor,
                                        adequacy["within_after_cv"]["n_trials"], seed)
         adequacy["within_taken_by"], adequacy["within_tried"] = taken, tried
@@ -194,6 +199,14 @@ def within_after(cv: Any, at: Anchored, canes: np.ndarray, height: np.ndarray, f
     with the model's own geometry draws in the null (as ``adequacy.within_after_cv``)."""
     g = geometry_draws(at, tuple(cv.fit.specs), factor, seed=seed)
     return within_trend_geometry(canes, cv.residual, height, g, seed=seed)
+
+
+def within_takers(candidates: tuple[str, ...], current: tuple[str, ...],
+                  unsupported: list[dict[str, Any]]) -> tuple[str, ...]:
+    """The candidates :func:`within_taken_by` tries: unnamed, in :data:`WITHIN_TAKERS`, and not just
+    refused for an interval that reaches no effect (it would be named back by the side door)."""
+    refused = {u["effect"] for u in unsupported}
+    return tuple(c for c in candidates if c not in current and c in WITHIN_TAKERS and c not in refused)
 
 
 def within_taken_by(others: tuple[str, ...], current: tuple[str, ...], at: Anchored, lkf: np.ndarray,

@@ -51,8 +51,8 @@
    account, with its gap and a model file of its own) and the result is
    ``unexplained``. The same holds for a model that leaves a trend with push height within
    canes (:func:`.adequacy.within_trend_geometry`: an effect acting on part of a cane; unless,
-   where it alone would withhold, an unnamed library effect fitted beside the named ones takes
-   the trend: then it is that effect below the naming rules, the names stand and the result is
+   where it alone would withhold, an unnamed flare fitted beside the named ones takes the trend:
+   then it is a taper fuller or leaner than the calipers' line, the names stand and the result is
    ``unexplained``, :func:`.verdict.within_taken_by`), for a model that leaves a cane's own pushes
    scattered about it far beyond what the caliper line's error can
    (:func:`.adequacy.within_dispersion`: an effect whose pattern along the cane changes from cane
