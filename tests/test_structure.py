@@ -153,11 +153,6 @@ def _rough_trace(rng: np.random.Generator, rough: float) -> tuple[np.ndarray, np
     return x, clean, clean * (1.0 + e) + rng.normal(0.0, 0.005, n)
 
 
-def _halves_ratio(x: np.ndarray, f: np.ndarray) -> float:
-    h = len(x) // 2  # as discovery.workflow._features
-    return float(np.polyfit(x[h:], f[h:], 1)[0] / np.polyfit(x[:h], f[:h], 1)[0])
-
-
 def test_the_curvature_row_is_reported_but_never_flags_the_model():
     """A rough rig's noise is in the field stiffness and in the trace's curvature at once, so
     under a correct model (residual = the cane's own level + what the noise did to the slope)
@@ -168,7 +163,7 @@ def test_the_curvature_row_is_reported_but_never_flags_the_model():
     :func:`structure_flags` flags none of them. A residual that follows push height does
     still flag."""
     from canebench.discovery.structure import NOT_JUDGED, structure_flags
-    from canebench.measure.fit import fit_line
+    from canebench.measure.fit import fit_line, halves_slope_ratio
 
     assert "curvature" in NOT_JUDGED
     rng = np.random.default_rng(5)
@@ -180,7 +175,7 @@ def test_the_curvature_row_is_reported_but_never_flags_the_model():
         for k in range(len(df)):
             x, clean, f = _rough_trace(rng, 0.03)
             res.append(lvl[k // 3] + np.log(fit_line(x, f).slope / fit_line(x, clean).slope))
-            curv.append(_halves_ratio(x, f))
+            curv.append(halves_slope_ratio(x, f))
         df["r"], df["curvature"] = res, curv
         t = structure_tests(df, "r", features=["height_m", "curvature"], seed=i)
         row = t[(t.feature == "curvature")].iloc[0]

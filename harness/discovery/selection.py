@@ -387,15 +387,10 @@ def entry_groups(add: tuple[str, ...], passed_alone: set[str]) -> list[tuple[str
     of 1.48 passed alone beside a flare, entered as a pair with a root whose interval then
     reached no effect, and went with it, leaving the flare misnamed: docs/discovery.md.)
     """
-    if len(add) < 2:
-        return [tuple(add)]
-    alone = [c for c in add if c in passed_alone]
     failed = tuple(c for c in add if c not in passed_alone)
-    if not alone:
+    if len(add) < 2 or failed == tuple(add):
         return [tuple(add)]
-    if not failed:
-        return [(c,) for c in add]
-    return [tuple(add), failed]
+    return [tuple(add), failed] if failed else [(c,) for c in add]
 
 
 def _prune(groups: Any, names: tuple[str, ...]) -> list[tuple[str, ...]]:

@@ -93,6 +93,7 @@ from ..data.dataset import Trial
 from ..data.rig import read_rig_csv
 from ..execute.pipeline import SIM_TRAVEL_MM, field_stage
 from ..execute.runner import run_trials
+from ..measure.fit import halves_slope_ratio
 from ..model.config import ModelConfig
 from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
 from ..model.presets import PRESETS
@@ -181,12 +182,8 @@ def _features(trials: list[Trial], geoms: dict, fields: dict) -> pd.DataFrame:
         g = geoms.get(t.id)
         fr = fields[t.id]
         curv = math.nan
-        if fr.fit is not None and fr.fit.displacement_mm is not None and len(fr.fit.displacement_mm) >= 8:
-            x, f = fr.fit.displacement_mm, fr.fit.force_n
-            h = len(x) // 2
-            a = np.polyfit(x[:h], f[:h], 1)[0]
-            b = np.polyfit(x[h:], f[h:], 1)[0]
-            curv = float(b / a) if a > 0 else math.nan
+        if fr.fit is not None and fr.fit.displacement_mm is not None:
+            curv = halves_slope_ratio(fr.fit.displacement_mm, fr.fit.force_n)
         cal_s = []
         length = math.nan
         if g is not None:

@@ -39,6 +39,23 @@ def fit_line(x: np.ndarray, y: np.ndarray) -> LineFit | None:
     return LineFit(float(b), float(a), float(r2), int(len(x)), se)
 
 
+def halves_slope_ratio(x: np.ndarray, y: np.ndarray, min_points: int = 8) -> float:
+    """How a trace bends: the line slope over its second half / over its first half.
+
+    NaN with fewer than ``min_points`` samples or a first half whose slope is not positive. (The
+    discovery's structure table reports it, ``curvature``, but never flags on it: it shares the
+    trace's noise with the fitted stiffness, :data:`canebench.discovery.structure.NOT_JUDGED`.)
+    """
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    if len(x) < min_points:
+        return float("nan")
+    h = len(x) // 2
+    a = np.polyfit(x[:h], y[:h], 1)[0]
+    b = np.polyfit(x[h:], y[h:], 1)[0]
+    return float(b / a) if a > 0 else float("nan")
+
+
 def window(x: np.ndarray, window: float | None) -> np.ndarray:
     """Mask of the samples within ``window`` of the first one (all when ``None``)."""
     x = np.asarray(x, float)

@@ -1,7 +1,7 @@
 """Does the structure table's curvature row flag a correct model when the rig's noise is rough?
 
 The row correlates, within canes, the stiffness residual with the trace's curvature (slope over
-the second half of contact / over the first, as ``discovery.workflow._features`` computes it).
+the second half of contact / over the first, ``measure.fit.halves_slope_ratio``).
 Both are read off the same trace. This script simulates correct models: 18 canes of three
 pushes, each cane with its own level (a modulus scatter of 0.3 in ln k), each trace a slightly
 stiffening line (0.5 mm steps, 20-88 samples) times (1 + e) with e an AR(1) roughness, plus a
@@ -22,15 +22,7 @@ import numpy as np
 import pandas as pd
 
 from canebench.discovery.structure import structure_tests
-from canebench.measure.fit import fit_line
-
-
-def curvature(x: np.ndarray, f: np.ndarray) -> float:
-    """As ``discovery.workflow._features``: slope of the second half / first half."""
-    h = len(x) // 2
-    a = np.polyfit(x[:h], f[:h], 1)[0]
-    b = np.polyfit(x[h:], f[h:], 1)[0]
-    return float(b / a) if a > 0 else np.nan
+from canebench.measure.fit import fit_line, halves_slope_ratio
 
 
 def trace(rng: np.random.Generator, n: int, k: float, bend: float, rough: float, phi: float):
@@ -50,7 +42,7 @@ def dataset(rng: np.random.Generator, rough: float, phi: float) -> pd.DataFrame:
             x, clean, f = trace(rng, int(rng.integers(20, 89)), np.exp(rng.normal(-1.5, 0.5)),
                                 rng.normal(0.15, 0.1), rough, phi)
             noise = np.log(fit_line(x, f).slope) - np.log(fit_line(x, clean).slope)
-            rows.append({"cane": f"c{c}", "r": level + noise, "curvature": curvature(x, f)})
+            rows.append({"cane": f"c{c}", "r": level + noise, "curvature": halves_slope_ratio(x, f)})
     return pd.DataFrame(rows)
 
 
@@ -68,7 +60,7 @@ def main() -> None:
         for _ in range(400):
             x, clean, f = trace(rng, 60, 0.2, 0.15, rough, phi)
             lk.append(np.log(fit_line(x, f).slope))
-            cv.append(curvature(x, f))
+            cv.append(halves_slope_ratio(x, f))
         print(f"roughness {rough:.2f} (AR(1) {phi:.2f}): one trace's noise in ln k vs in curvature r = "
               f"{np.corrcoef(lk, cv)[0, 1]:+.2f}; correct models: median r {np.median(rs):+.2f}, "
               f"p < 0.05 in {np.mean(ps < 0.05):.2f}, p < 0.01/12 in {np.mean(ps < 0.01 / 12):.2f} of {n_sets}")
