@@ -55,3 +55,11 @@ def warn_input(source: str, field: str, message: str) -> None:
     import warnings
 
     warnings.warn(InputWarning(source, field, message), stacklevel=3)
+
+
+def cell_text(value: object) -> str:
+    """A table cell as an error message shows it: ``empty`` when missing, else its value quoted."""
+    if value is None or (isinstance(value, float) and value != value) or (isinstance(value, str) and not value.strip()):
+        return "empty"
+    item = getattr(value, "item", None)  # a numpy scalar reads as its Python value, not np.float64(...)
+    return repr(item() if callable(item) else value)

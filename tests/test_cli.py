@@ -42,6 +42,23 @@ def test_bad_inputs_exit_2_with_message(tmp_path: Path, capsys):
     assert "modulus_pa" in capsys.readouterr().err
     assert main(["run", "--field", str(tmp_path / "missing"), "--out", str(tmp_path / "z")]) == 2
     assert main(["run", "--trials", "zzz*", "--out", str(tmp_path / "w")]) == 2
+    # every command that takes engine names refuses a mistyped one before doing any work
+    # (discover used to fit for minutes first; bench --engines timed it as 54 failed trials)
+    for cmd in (["discover", "--out", str(tmp_path / "d")], ["bench", "--engines"], ["bench", "--morris"],
+                ["bench", "--discover"]):
+        assert main([*cmd, "--backends", "beam,nosuch"]) == 2, cmd
+        assert "unknown backend 'nosuch'" in capsys.readouterr().err, cmd
+    assert not (tmp_path / "d").exists()
+    # discovery settings no run can use are refused before any work, naming the option
+    for opt, val in (("--alpha", "2"), ("--alpha", "nan"), ("--alpha", "0"), ("--bootstrap", "0"),
+                     ("--min-change", "-0.1"), ("--min-change", "inf")):
+        assert main(["discover", "--out", str(tmp_path / "d"), opt, val]) == 2, (opt, val)
+        assert f"{opt}: field" in capsys.readouterr().err, (opt, val)
+    assert main(["discover", "--selftest", "--workers", "0", "--out", str(tmp_path / "d")]) == 2
+    assert "--workers" in capsys.readouterr().err
+    assert main(["discover", "--selftest", "--selftest-cases", "zz*", "--out", str(tmp_path / "d")]) == 2
+    assert "--selftest-cases" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
 
 
 def test_a_bad_cane_is_refused_before_any_simulation(tmp_path: Path, capsys):

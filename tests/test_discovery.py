@@ -520,6 +520,50 @@ def test_discover_names_nothing_on_a_null_dataset(tmp_path):
     assert not res.adequacy["inadequate"], res.adequacy
 
 
+def test_a_mistyped_engine_stops_discovery_before_any_work_and_a_missing_one_is_skipped(tmp_path):
+    """An unknown name raises before the output folder exists (it used to surface from the
+    provenance block after minutes of fitting, and an engine that is not installed crashed
+    there too); an engine that is not installed is skipped, and the result says why."""
+    from canebench.backends.base import DynamicBackend
+    from canebench.canes.generate_hidden import generate_hidden
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.errors import BackendUnavailable, UnknownBackend
+    from canebench.execute.executors import make_executor
+    from canebench.registry import register_backend, unregister_backend
+
+    trials = load_dataset(generate_hidden(tmp_path / "null", 12, {}, n_bushes=2))
+    out = tmp_path / "out"
+    with pytest.raises(UnknownBackend, match="nosuch"):
+        discover(trials, backends=["beam", "nosuch"], out=out)
+    assert not out.exists()
+
+    class NotInstalled(DynamicBackend):
+        name, engine_module = "discover_not_installed", "no_such_engine_module_here"
+
+        def settings(self, proto):
+            return {}
+
+        def build(self, chain, proto):
+            raise AssertionError("an unavailable engine is never built")
+
+    register_backend(NotInstalled)
+    try:
+        with pytest.raises(BackendUnavailable, match="discover_not_installed"):
+            from canebench.discovery import workflow
+
+            workflow._engines("test", "discover_not_installed", None)
+        res = discover(trials, backends=["beam", "discover_not_installed"], out=out,
+                       executor=make_executor("serial", 1, None), n_boot=5)
+    finally:
+        unregister_backend("discover_not_installed")
+    assert any(n.startswith("backend discover_not_installed skipped: ") and "no_such_engine_module_here" in n
+               for n in res.notes), res.notes
+    assert set(res.gap["per_backend"]) == {"beam"}
+    doc = json.loads((out / "discovery.json").read_text())
+    assert doc["provenance"]["engines"].keys() == {"beam"}
+
+
 def test_of_the_effects_that_pass_the_one_with_the_lowest_bic_is_named(tmp_path, monkeypatch):
     """A probe pitched 30 degrees on canes whose moduli scatter 0.3 in ln (twice the self-test's;
     the real canes scatter more): a modulus scale and the pitch both pass the first step, and

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from ..errors import BackendUnavailable
+from . import common
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     be = sub.add_parser("bench", help="benchmarks: protocols, beam sweep, engines' CPU time, job runner overhead, Morris per engine")
@@ -44,6 +47,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def main(a: argparse.Namespace) -> int:
     from ..studies import bench
 
+    if a.backends:
+        # a mistyped engine stops here, as in ``canebench run``; one not installed is skipped, said on stderr
+        usable, _ = common.backends(a.backends)
+        if not usable:
+            raise BackendUnavailable(f"--backends {a.backends}: no engine there can run")
+        a.backends = ",".join(usable)
     if a.morris:
         bench.bench_morris(backends=a.backends.split(",") if a.backends else None, data=a.field, trials=a.trials,
                            n_trials=a.n_trials, paper_runs=a.paper_runs, paper_steps=a.paper_steps,

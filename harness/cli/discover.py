@@ -58,7 +58,7 @@ def main(a: argparse.Namespace) -> int:
 
     _, trials = common.trials(a)
     ex = common.executor(argparse.Namespace(executor=a.executor, jobs=a.jobs, scheduler=a.scheduler))
-    backends = [b.strip() for b in a.backends.split(",")] if a.backends else None
+    backends = [b.strip() for b in a.backends.split(",") if b.strip()] if a.backends else None
     cands = tuple(c.strip() for c in a.candidates.split(",")) if a.candidates else None
     res = discover(trials, a.baseline, backends, a.out, ex, cands, a.alpha, a.bootstrap, confirm=not a.no_confirm,
                    progress=Progress(), min_change=a.min_change)

@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError, warn_input
+from ..errors import InputError, cell_text, warn_input
 
 CALIPERS = tuple(f"caliper_{i}_mm" for i in range(1, 7))
 SAMPLE_COLUMNS = ("sample_id", "season", "variety", "age", "span_mm") + CALIPERS
@@ -124,7 +124,7 @@ def _numbers(df: pd.DataFrame, col: str, line: np.ndarray, src: str, positive: b
     bad = ~np.isfinite(vals)
     if bad.any():
         i = int(np.argmax(bad))
-        raise InputError(src, col, f"line {line[i]}: not a finite number ({df[col].iloc[i]!r})")
+        raise InputError(src, col, f"line {line[i]}: not a finite number ({cell_text(df[col].iloc[i])})")
     if positive and (vals <= 0).any():
         i = int(np.argmax(vals <= 0))
         raise InputError(src, col, f"line {line[i]}: must be > 0 (got {vals[i]:g})")

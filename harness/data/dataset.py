@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from .cane import CaneDescription, cane_from_dict, load_cane
-from ..errors import InputError, warn_input
+from ..errors import InputError, cell_text, warn_input
 
 STRAIGHT_ASSUMPTION = ("geometry assumed: straight vertical cane from the ground to the highest push point "
                        "(the field data has no polylines)")
@@ -63,7 +63,7 @@ def read_push_points(path: Path) -> pd.DataFrame:
         bad = ~np.isfinite(vals.to_numpy(float))
         if bad.any():
             i = int(bad.argmax())
-            raise InputError(src, col, f"row {i + 2}: not a finite number ({df[col].iloc[i]!r})")
+            raise InputError(src, col, f"row {i + 2}: not a finite number ({cell_text(df[col].iloc[i])})")
         if col in ("height_mm", "diameter_mm") and (vals <= 0).any():
             i = int((vals <= 0).to_numpy().argmax())
             raise InputError(src, col, f"row {i + 2}: must be > 0, got {vals.iloc[i]}")

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
+from ..errors import InputError, cell_text
 
 SENSORS = ("pushed", "left", "right")
 CHANNELS = tuple(f"{s}_{a}" for s in SENSORS for a in "xyz")
@@ -77,7 +77,7 @@ def read_imu_csv(path: str | Path, rate_hz: float = RATE_HZ) -> pd.DataFrame:
         bad = ~np.isfinite(vals)
         if bad.any():
             i = int(np.argmax(bad))
-            raise InputError(src, col, f"row {i + 2}: not a finite number ({df[col].iloc[i]!r})")
+            raise InputError(src, col, f"row {i + 2}: not a finite number ({cell_text(df[col].iloc[i])})")
         if col != "time_s" and np.abs(vals).max() > MAX_ABS_ACCEL:
             i = int(np.argmax(np.abs(vals)))
             raise InputError(src, col, f"row {i + 2}: |{vals[i]:g}| > {MAX_ABS_ACCEL:g} m/s^2; "

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError, warn_input
+from ..errors import InputError, cell_text, warn_input
 
 COLUMNS = {
     "iteration": "Iteration",
@@ -65,7 +65,7 @@ def read_rig_csv(path: str | Path) -> RigTrial:
         bad = ~np.isfinite(vals)
         if bad.any():
             i = int(np.argmax(bad))
-            raise InputError(src, col, f"row {i + 2}: not a finite number ({df[col].iloc[i]!r})")
+            raise InputError(src, col, f"row {i + 2}: not a finite number ({cell_text(df[col].iloc[i])})")
         out[key] = vals
     disp = out["disp"] - out["disp"][0]
     step = float(np.median(np.diff(disp))) if len(disp) > 1 else 0.0

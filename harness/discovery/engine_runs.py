@@ -165,6 +165,12 @@ def model_shape_check(engine: BaselineEngine, base_run: Any, specs: tuple[Effect
     return out
 
 
+def _stat(f: Any, x: np.ndarray) -> float:
+    """``f`` of |x| over its finite values; NaN, without a warning, when an engine failed on every trial."""
+    a = np.abs(x[np.isfinite(x)])
+    return float(f(a)) if len(a) else math.nan
+
+
 def confirm(trials: list[Trial], backends: list[str], *, proto: Any, base_config: ModelConfig,
             model: ModelConfig, F: pd.DataFrame, final: CVResult, anchor: Anchored, baseline: Anchored,
             out: Path | None, executor: Any, progress: Any) -> pd.DataFrame:
@@ -219,12 +225,9 @@ def confirm(trials: list[Trial], backends: list[str], *, proto: Any, base_config
         after_cv = lb + fold_change - lkf
         dev = np.abs((la - lb) - full_change)
         dev0 = np.abs((la - lb) - lin_change)
-        rows.append({"backend": b, "before_median": float(np.nanmedian(np.abs(before))),
-                     "before_worst": float(np.nanmax(np.abs(before))),
-                     "after_median": float(np.nanmedian(np.abs(after))), "after_worst": float(np.nanmax(np.abs(after))),
-                     "after_cv_median": float(np.nanmedian(np.abs(after_cv))),
-                     "after_cv_worst": float(np.nanmax(np.abs(after_cv))),
-                     "screen_vs_engine_max": float(np.nanmax(dev)) if np.isfinite(dev).any() else math.nan,
-                     "linear_screen_vs_engine_max": float(np.nanmax(dev0)) if np.isfinite(dev0).any() else math.nan,
+        rows.append({"backend": b, "before_median": _stat(np.median, before), "before_worst": _stat(np.max, before),
+                     "after_median": _stat(np.median, after), "after_worst": _stat(np.max, after),
+                     "after_cv_median": _stat(np.median, after_cv), "after_cv_worst": _stat(np.max, after_cv),
+                     "screen_vs_engine_max": _stat(np.max, dev), "linear_screen_vs_engine_max": _stat(np.max, dev0),
                      "n_ok_before": int(np.isfinite(lb).sum()), "n_ok_after": int(np.isfinite(la).sum())})
     return pd.DataFrame(rows)

@@ -251,16 +251,18 @@ def run_selftest(out: str | Path, seed: int = 7, workers: int = 2, cases: list[d
     """
     import fnmatch
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    from canebench.errors import InputError
+
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise InputError("--workers", "workers", f"must be a positive integer, got {workers!r}")
     cases = cases or suite(seed)
     if only:
         pats = [p.strip() for p in only.split(",") if p.strip()]
         cases = [c for c in cases if any(fnmatch.fnmatch(c["id"], p) for p in pats)]
         if not cases:
-            from canebench.errors import InputError
-
             raise InputError("--selftest-cases", only, "matches no self-test case")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
     if workers > 1:
         with ProcessPoolExecutor(workers) as ex:
             rows = list(ex.map(run_case, cases, [str(out)] * len(cases)))

@@ -210,6 +210,43 @@ def _gap(r: np.ndarray) -> dict[str, float]:
             "worst_abs_log_ratio": float(np.max(a)) if len(a) else math.nan, "n": int(len(a))}
 
 
+def _check_settings(alpha: float, n_boot: int, min_change: float, max_effects: int) -> None:
+    """Refuse settings no discovery can use, before any work (each named by its CLI option)."""
+    from ..errors import InputError
+
+    if not (isinstance(alpha, (int, float)) and 0.0 < alpha < 1.0):  # also refuses NaN
+        raise InputError("--alpha", "alpha", f"must lie strictly between 0 and 1, got {alpha!r}")
+    if isinstance(n_boot, bool) or not isinstance(n_boot, (int, np.integer)) or n_boot < 1:
+        raise InputError("--bootstrap", "bootstrap", f"the cane resamples of the intervals must be a positive "
+                                                     f"integer, got {n_boot!r}")
+    if not (isinstance(min_change, (int, float)) and math.isfinite(min_change) and min_change >= 0.0):
+        raise InputError("--min-change", "min_change", f"must be a finite change in ln k >= 0, got {min_change!r}")
+    if isinstance(max_effects, bool) or not isinstance(max_effects, (int, np.integer)) or max_effects < 1:
+        raise InputError("max_effects", "max_effects", f"must be a positive integer, got {max_effects!r}")
+
+
+def _engines(baseline: str, base_backend: str, backends: list[str] | None) -> tuple[list[str], dict[str, str]]:
+    """The engines to confirm on (each once) and those skipped, with the reason.
+
+    Raises :class:`~canebench.errors.UnknownBackend` on a name the registry does not hold, and
+    :class:`~canebench.errors.BackendUnavailable` when the baseline's own engine cannot run
+    (nothing can be scored without it); any other engine that cannot run is skipped, as
+    ``canebench run`` skips it.
+    """
+    import warnings
+
+    from ..errors import BackendUnavailable
+    from ..registry import select
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the registry's warning would repeat the reason returned here
+        _, base_skipped = select([base_backend])
+        if base_skipped:
+            raise BackendUnavailable(f"baseline {baseline!r} runs on backend {base_backend!r}, which is unavailable: "
+                                     f"{base_skipped[base_backend]}")
+        return select(list(dict.fromkeys(backends or [base_backend])))
+
+
 def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | None = None,
              out: str | Path | None = None, executor: Any = None, candidates: tuple[str, ...] | None = None,
              alpha: float = ALPHA, n_boot: int = 100, seed: int = 0, confirm: bool = True,
@@ -222,7 +259,9 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     baseline : str
         ``beam`` (default), ``chain`` or ``paper`` (:data:`BASELINES`).
     backends : list of str, optional
-        Engines re-run before and after with the fitted model (default: the baseline's).
+        Engines re-run before and after with the fitted model (default: the baseline's). A name
+        the registry does not hold raises before any work; an engine that is not installed is
+        skipped, with a note saying why.
     out : path, optional
         Folder for ``discovery.json``, ``discovery.csv``, ``model.yaml``, figures and the runner's stores.
     candidates : tuple of str, optional
@@ -251,10 +290,13 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             from ..errors import InputError
 
             raise InputError("--candidates", c, f"unknown effect; registered: {', '.join(EFFECTS)}")
+    # a mistyped engine stops the run here, before minutes of work; one not installed is skipped
+    confirm_on, skipped = _engines(baseline, base_backend, backends)
+    _check_settings(alpha, n_boot, min_change, max_effects)
     outp = Path(out) if out is not None else None
     if outp is not None:
         outp.mkdir(parents=True, exist_ok=True)
-    notes: list[str] = []
+    notes: list[str] = [f"backend {b} skipped: {why}" for b, why in skipped.items()]
     timing: dict[str, float] = {}
 
     # -- field, obstruction onsets
@@ -440,11 +482,13 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
 
     # -- confirm on the engines
     engines = pd.DataFrame()
-    if confirm:
+    if confirm and not confirm_on:
+        notes.append("no engine to confirm on: every one asked for is skipped (above)")
+    if confirm and confirm_on:
         t5 = time.perf_counter()
         # with the names withheld the engines run the library's best account: what it would do on
         # every engine is worth seeing; the named model's "after" is the "before"
-        engines = engine_runs.confirm(trials, backends or [base_backend], proto=proto, base_config=cfg_b,
+        engines = engine_runs.confirm(trials, confirm_on, proto=proto, base_config=cfg_b,
                                       model=partial_config or model, F=F, final=final,
                                       anchor=at, baseline=at0,
                                       out=outp, executor=executor, progress=progress)
