@@ -49,6 +49,12 @@ def test_bad_inputs_exit_2_with_message(tmp_path: Path, capsys):
         assert main([*cmd, "--backends", "beam,nosuch"]) == 2, cmd
         assert "unknown backend 'nosuch'" in capsys.readouterr().err, cmd
     assert not (tmp_path / "d").exists()
+    for cmd in (["run", "--out", str(tmp_path / "r")], ["study", "naive", "--out", str(tmp_path / "s")]):
+        assert main([*cmd, "--backends", "nosuch"]) == 2, cmd
+        assert "unknown backend 'nosuch'" in capsys.readouterr().err, cmd
+    assert not (tmp_path / "r").exists() and not (tmp_path / "s").exists()
+    assert main(["bench", "--morris", "--workers", "0"]) == 2
+    assert "--workers" in capsys.readouterr().err
     # discovery settings no run can use are refused before any work, naming the option
     for opt, val in (("--alpha", "2"), ("--alpha", "nan"), ("--alpha", "0"), ("--bootstrap", "0"),
                      ("--min-change", "-0.1"), ("--min-change", "inf")):
@@ -56,8 +62,10 @@ def test_bad_inputs_exit_2_with_message(tmp_path: Path, capsys):
         assert f"{opt}: field" in capsys.readouterr().err, (opt, val)
     assert main(["discover", "--selftest", "--workers", "0", "--out", str(tmp_path / "d")]) == 2
     assert "--workers" in capsys.readouterr().err
-    assert main(["discover", "--selftest", "--selftest-cases", "zz*", "--out", str(tmp_path / "d")]) == 2
-    assert "--selftest-cases" in capsys.readouterr().err
+    assert main(["discover", "--selftest", "--selftest-cases", "zz*", "--alpha", "0.1", "--backends", "mujoco",
+                 "--out", str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err
+    assert "--selftest-cases" in err and "--backends, --alpha do not apply" in err
     assert not (tmp_path / "d").exists()
 
 

@@ -520,6 +520,20 @@ def test_discover_names_nothing_on_a_null_dataset(tmp_path):
     assert not res.adequacy["inadequate"], res.adequacy
 
 
+def test_discovery_settings_are_checked_whatever_numeric_type_carries_them():
+    """numpy scalars pass (a sweep from Python hands them over); bools, NaN and out-of-range values do not."""
+    from canebench.discovery.workflow import _check_settings
+    from canebench.errors import InputError
+
+    _check_settings(np.float32(0.05), np.int64(40), np.float32(0.0), np.uint8(3))
+    _check_settings(0.01, 1, 0, 1)
+    for bad in ((True, 40, 0.05, 3), (0.05, True, 0.05, 3), (0.05, 40, True, 3), (0.05, 40, 0.05, False),
+                (float("nan"), 40, 0.05, 3), (1.0, 40, 0.05, 3), (0.05, 40.0, 0.05, 3), (0.05, 0, 0.05, 3),
+                (0.05, 40, float("nan"), 3), (0.05, 40, -1e-9, 3), (0.05, 40, 0.05, 0), (0.05, 40, "0.05", 3)):
+        with pytest.raises(InputError):
+            _check_settings(*bad)
+
+
 def test_a_mistyped_engine_stops_discovery_before_any_work_and_a_missing_one_is_skipped(tmp_path):
     """An unknown name raises before the output folder exists (it used to surface from the
     provenance block after minutes of fitting, and an engine that is not installed crashed

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import BackendUnavailable
+from ..errors import BackendUnavailable, InputError
 from . import common
 
 
@@ -47,6 +47,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def main(a: argparse.Namespace) -> int:
     from ..studies import bench
 
+    if a.workers < 1:
+        raise InputError("--workers", "workers", f"must be >= 1, got {a.workers}")
     if a.backends:
         # a mistyped engine stops here, as in ``canebench run``; one not installed is skipped, said on stderr
         usable, _ = common.backends(a.backends)

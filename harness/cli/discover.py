@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from . import common
@@ -35,6 +36,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def main(a: argparse.Namespace) -> int:
     if a.selftest:
         from ..discovery.selftest import run_selftest, summarize
+
+        # the suite scores the default workflow on its own datasets; say which options it leaves aside
+        ignored = [opt for opt, v, default in (
+            ("--field", a.field, None), ("--trials", a.trials, None), ("--baseline", a.baseline, "beam"), ("--backends", a.backends, None),
+            ("--candidates", a.candidates, None), ("--alpha", a.alpha, 0.05), ("--min-change", a.min_change, 0.05),
+            ("--bootstrap", a.bootstrap, 100), ("--no-confirm", a.no_confirm, False)) if v != default]
+        if ignored:
+            print(f"note: the self-test runs the default workflow on its own datasets: {', '.join(ignored)} "
+                  "do not apply", file=sys.stderr)
 
         out = Path(a.out if a.out != "canebench-runs/discover" else "canebench-runs/discover-selftest")
         df = run_selftest(out, a.seed, a.workers, only=a.selftest_cases)

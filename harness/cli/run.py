@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..errors import InputError, InputWarning
+from ..errors import CanebenchError, InputError, InputWarning
 
 from . import common
 
@@ -37,7 +37,7 @@ def main(a: argparse.Namespace) -> int:
     out = common.out_dir(a.out, "run")  # a bad --out fails before any work
     try:
         return _run(a, out)
-    except (InputError, InputWarning):
+    except (CanebenchError, InputWarning):  # a bad file, value or engine name
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # refused input leaves no empty run folder behind
         raise

@@ -37,6 +37,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def main(a: argparse.Namespace) -> int:
     from ..studies import STUDIES
 
+    simulates = a.name not in ("contact", "modulus")
+    if simulates:  # a mistyped engine stops before the run folder is made
+        usable, skipped = common.backends(a.backends)
     out = common.out_dir(a.out, f"study-{a.name}")
     t0 = time.perf_counter()
     code = 0
@@ -79,7 +82,6 @@ def main(a: argparse.Namespace) -> int:
         from ..probe.protocol import get_protocol
 
         data_dir, trials = common.trials(a)
-        usable, skipped = common.backends(a.backends)
         proto = get_protocol(a.protocol)
         ex = common.executor(a)
         meta = provenance(usable, proto, None, {"command": " ".join(sys.argv), "dataset": str(data_dir.resolve()),

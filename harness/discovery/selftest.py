@@ -250,10 +250,11 @@ def run_selftest(out: str | Path, seed: int = 7, workers: int = 2, cases: list[d
     ``only`` is a comma-separated list of globs on case ids (e.g. ``'*null*,*pair*'``).
     """
     import fnmatch
+    from numbers import Integral
 
     from canebench.errors import InputError
 
-    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+    if isinstance(workers, bool) or not isinstance(workers, Integral) or workers < 1:
         raise InputError("--workers", "workers", f"must be a positive integer, got {workers!r}")
     cases = cases or suite(seed)
     if only:

@@ -212,16 +212,24 @@ def _gap(r: np.ndarray) -> dict[str, float]:
 
 def _check_settings(alpha: float, n_boot: int, min_change: float, max_effects: int) -> None:
     """Refuse settings no discovery can use, before any work (each named by its CLI option)."""
+    from numbers import Integral, Real
+
     from ..errors import InputError
 
-    if not (isinstance(alpha, (int, float)) and 0.0 < alpha < 1.0):  # also refuses NaN
+    def real(v: Any) -> bool:  # numpy's scalars are registered with the numbers ABCs; a bool is not a setting
+        return isinstance(v, Real) and not isinstance(v, bool)
+
+    def count(v: Any) -> bool:
+        return isinstance(v, Integral) and not isinstance(v, bool) and v >= 1
+
+    if not (real(alpha) and 0.0 < alpha < 1.0):  # also refuses NaN
         raise InputError("--alpha", "alpha", f"must lie strictly between 0 and 1, got {alpha!r}")
-    if isinstance(n_boot, bool) or not isinstance(n_boot, (int, np.integer)) or n_boot < 1:
+    if not count(n_boot):
         raise InputError("--bootstrap", "bootstrap", f"the cane resamples of the intervals must be a positive "
                                                      f"integer, got {n_boot!r}")
-    if not (isinstance(min_change, (int, float)) and math.isfinite(min_change) and min_change >= 0.0):
+    if not (real(min_change) and math.isfinite(min_change) and min_change >= 0.0):
         raise InputError("--min-change", "min_change", f"must be a finite change in ln k >= 0, got {min_change!r}")
-    if isinstance(max_effects, bool) or not isinstance(max_effects, (int, np.integer)) or max_effects < 1:
+    if not count(max_effects):
         raise InputError("max_effects", "max_effects", f"must be a positive integer, got {max_effects!r}")
 
 
@@ -290,9 +298,9 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             from ..errors import InputError
 
             raise InputError("--candidates", c, f"unknown effect; registered: {', '.join(EFFECTS)}")
+    _check_settings(alpha, n_boot, min_change, max_effects)
     # a mistyped engine stops the run here, before minutes of work; one not installed is skipped
     confirm_on, skipped = _engines(baseline, base_backend, backends)
-    _check_settings(alpha, n_boot, min_change, max_effects)
     outp = Path(out) if out is not None else None
     if outp is not None:
         outp.mkdir(parents=True, exist_ok=True)
