@@ -213,11 +213,14 @@ def select(names: list[str]) -> tuple[list[str], dict[str, str]]:
     """Split requested names into usable ones and skipped ones (with reasons).
 
     Unknown names raise :class:`UnknownBackend` (a typo should stop the run);
-    unavailable ones are skipped with their reason.
+    unavailable ones are skipped with their reason (returned, so the registry's own warning
+    about them is not repeated). Each name counts once, in the order given.
     """
-    reg = discover()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reg = discover()
     usable, skipped = [], {}
-    for n in names:
+    for n in dict.fromkeys(names):
         if n not in reg:
             raise UnknownBackend(f"unknown backend {n!r}; registered: {', '.join(sorted(reg))}")
         if reg[n].available:

@@ -7,7 +7,6 @@ import datetime as _dt
 import os
 import signal
 import sys
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -123,10 +122,7 @@ def assumptions(trials: list, config: Any) -> list[str]:
 def backends(spec: str) -> tuple[list[str], dict[str, str]]:
     from ..registry import select
 
-    names = list(dict.fromkeys(n.strip() for n in spec.split(",") if n.strip()))  # each backend once
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        usable, skipped = select(names)
+    usable, skipped = select([n.strip() for n in spec.split(",") if n.strip()])
     for n, why in skipped.items():
         print(f"skipping backend {n}: {why}", file=sys.stderr)
     return usable, skipped

@@ -241,18 +241,14 @@ def _engines(baseline: str, base_backend: str, backends: list[str] | None) -> tu
     (nothing can be scored without it); any other engine that cannot run is skipped, as
     ``canebench run`` skips it.
     """
-    import warnings
-
     from ..errors import BackendUnavailable
     from ..registry import select
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the registry's warning would repeat the reason returned here
-        _, base_skipped = select([base_backend])
-        if base_skipped:
-            raise BackendUnavailable(f"baseline {baseline!r} runs on backend {base_backend!r}, which is unavailable: "
-                                     f"{base_skipped[base_backend]}")
-        return select(list(dict.fromkeys(backends or [base_backend])))
+    _, base_skipped = select([base_backend])
+    if base_skipped:
+        raise BackendUnavailable(f"baseline {baseline!r} runs on backend {base_backend!r}, which is unavailable: "
+                                 f"{base_skipped[base_backend]}")
+    return select(backends or [base_backend])
 
 
 def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | None = None,
