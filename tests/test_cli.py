@@ -109,9 +109,13 @@ def test_module_entry_point_runs():
     assert r.returncode == 0 and "mujoco" in r.stdout
 
 
-def test_study_modulus_command_writes_tables_figures_and_report(tmp_path: Path):
+def test_study_modulus_command_writes_tables_figures_and_report(tmp_path: Path, capsys):
     out = tmp_path / "mod"
-    assert main(["study", "modulus", "--out", str(out)]) == 0
+    # options the in-process study does not read are named, not silently dropped
+    assert main(["study", "modulus", "--out", str(out), "--backends", "mujoco", "--timeout", "0",
+                 "--executor", "local"]) == 0
+    err = capsys.readouterr().err
+    assert "leaves --backends, --timeout aside" in err, err
     for f in ("modulus.csv", "modulus_groups.csv", "modulus_tests.csv", "modulus_by_season.png",
               "modulus_fruiting.png", "report.html"):
         assert (out / f).exists(), f
