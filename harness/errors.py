@@ -58,12 +58,15 @@ def warn_input(source: str, field: str, message: str) -> None:
 
 
 def cell_text(value: object) -> str:
-    """A table cell as an error message shows it: ``empty`` when missing, else its value quoted."""
+    """A table cell as an error message shows it: ``empty or NA`` when missing, else its value quoted.
+
+    pandas reads an empty cell and the markers ``NA``, ``nan``, ``null`` alike, so the message names both.
+    """
     try:
         missing = value is None or bool(value != value)  # NaN of any float type, NaT
     except TypeError:  # pandas' NA has no truth value
         missing = True
     if missing or (isinstance(value, str) and not value.strip()):
-        return "empty"
+        return "empty or NA"
     item = getattr(value, "item", None)  # a numpy scalar reads as its Python value, not np.float64(...)
     return repr(item() if callable(item) else value)

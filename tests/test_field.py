@@ -136,11 +136,12 @@ def test_non_numeric_and_non_monotonic(tmp_path):
     p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,abc,10.5,800\n")
     with pytest.raises(InputError, match=r"row 3: not a finite number \('abc'\)"):
         read_rig_csv(p)
-    # a truncated row: the missing cell is said to be empty, not shown as a numpy repr
-    p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,4.0,10.5,800\n3,1000\n")
-    with pytest.raises(InputError, match=r"row 4: not a finite number \(empty\)") as e:
-        read_rig_csv(p)
-    assert e.value.field == "Load Cell Reading (gf)"
+    # a truncated row or a literal NA: the missing cell is named so, not shown as a numpy repr
+    for row in ("3,1000", "3,1000,NA,11,800"):
+        p = _write(tmp_path, HEADER + f"1,0,3.0,10,800\n2,500,4.0,10.5,800\n{row}\n")
+        with pytest.raises(InputError, match=r"row 4: not a finite number \(empty or NA\)") as e:
+            read_rig_csv(p)
+        assert e.value.field == "Load Cell Reading (gf)"
     p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,4,10,800\n3,1000,4,11,800\n")
     with pytest.raises(InputError, match="does not increase"):
         read_rig_csv(p)
