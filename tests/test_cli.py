@@ -122,3 +122,11 @@ def test_study_modulus_command_writes_tables_figures_and_report(tmp_path: Path, 
     (out / "report.html").unlink()
     assert main(["report", str(out)]) == 0  # rebuilt from the files alone
     assert "flexural" in (out / "report.html").read_text().lower()
+
+
+def test_bench_engines_times_the_engines_named(capsys):
+    # --backends mujoco once meant "the default", so every installed engine was timed
+    assert main(["bench", "--engines", "--backends", "mujoco", "--trials", "b1c1t1"]) == 0
+    out = capsys.readouterr().out
+    rows = out.split("backend", 1)[1].splitlines()[1:]
+    assert [r.split()[0] for r in rows if r.strip() and not r.startswith("total")] == ["mujoco"], out

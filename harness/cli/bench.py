@@ -49,25 +49,23 @@ def main(a: argparse.Namespace) -> int:
 
     if a.workers < 1:
         raise InputError("--workers", "workers", f"must be >= 1, got {a.workers}")
+    names: list[str] | None = None  # None: each benchmark's own default engines
     if a.backends:
         # a mistyped engine stops here, as in ``canebench run``; one not installed is skipped, said on stderr
-        usable, _ = common.backends(a.backends)
-        if not usable:
+        names, _ = common.backends(a.backends)
+        if not names:
             raise BackendUnavailable(f"--backends {a.backends}: no engine there can run")
-        a.backends = ",".join(usable)
     if a.morris:
-        bench.bench_morris(backends=a.backends.split(",") if a.backends else None, data=a.field, trials=a.trials,
-                           n_trials=a.n_trials, paper_runs=a.paper_runs, paper_steps=a.paper_steps,
-                           workers=a.workers)
+        bench.bench_morris(backends=names, data=a.field, trials=a.trials, n_trials=a.n_trials,
+                           paper_runs=a.paper_runs, paper_steps=a.paper_steps, workers=a.workers)
         return 0
     if a.discover:
-        bench.bench_discover(data=a.field, backends=a.backends.split(",") if a.backends else None, workers=a.workers)
+        bench.bench_discover(data=a.field, backends=names, workers=a.workers)
         return 0
-    a.backends = a.backends or "mujoco"
     if a.beam:
         bench.bench_beam(trials=a.trials or "b1c1t1,b3c1t2,b5c3t1,b6c2t3")
     elif a.engines:
-        bench.bench_engines(trials=a.trials, backends=None if a.backends == "mujoco" else a.backends.split(","))
+        bench.bench_engines(trials=a.trials, backends=names)
     elif a.memory:
         bench.bench_memory()
     elif a.export:
@@ -75,6 +73,6 @@ def main(a: argparse.Namespace) -> int:
     elif a.runner:
         bench.bench_runner(n_jobs=a.n_jobs)
     else:
-        bench.bench_protocols(trials=a.trials or "b1c1t1,b1c2t1,b3c1t2", backends=a.backends.split(","),
+        bench.bench_protocols(trials=a.trials or "b1c1t1,b1c2t1,b3c1t2", backends=names or ["mujoco"],
                               steps=a.steps)
     return 0
