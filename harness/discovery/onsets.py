@@ -159,3 +159,33 @@ def detect_early_contact(x_mm: np.ndarray, f_gf: np.ndarray, knee_mm: float) -> 
     if x[i0] - x[b] < MIN_EARLY_RAMP_MM:
         return None
     return EarlyContact(float(x[b]), float(x[i0] - x[b]), k1, k2, float(t))
+
+
+def ramp_is_the_cane(e: EarlyContact, k_model_gf_mm: float, level: float) -> bool:
+    """Whether an early contact's ramp, and not the slope after its knee, is the cane's.
+
+    A load cell that settles after the rig starts logging drifts by a few gf over the first
+    millimetres: a slow ramp, then the real contact's far steeper slope, the shape of a soft
+    contact before a second body (an independently generated set's drifts of 2-7 gf gave 15
+    such ramps in 16 datasets, each named an obstruction at its true contact). Which of the two
+    slopes is the cane's the model tells, through the cane's other pushes: ``level`` is the
+    ln(k_field / k_model) they show (the cane's own modulus and whatever the model misses
+    there), and the ramp is the cane's when its ln(slope / k_model) is at least as near that
+    level as the slope after the knee's. A contact followed by a second body leaves the ramp
+    at the cane's level and the slope after above it; a drift leaves the ramp one to four
+    units of ln below it and the slope after at it.
+
+    Parameters
+    ----------
+    e : EarlyContact
+        The ramp and the slope after the knee (gf/mm).
+    k_model_gf_mm : float
+        The model's stiffness for this push (gf/mm).
+    level : float
+        The expected ln(k_field / k_model) of this push.
+    """
+    if not (k_model_gf_mm > 0 and math.isfinite(k_model_gf_mm) and math.isfinite(level)):
+        return True  # nothing to compare with: the trace's shape alone decides, as before
+    l1 = math.log(e.slope_before / k_model_gf_mm)
+    l2 = math.log(e.slope_after / k_model_gf_mm)
+    return abs(l1 - level) <= abs(l2 - level)

@@ -98,11 +98,12 @@ from ..model.config import ModelConfig
 from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
 from ..model.presets import PRESETS
 from ..probe.protocol import PROTOCOLS
+from ..units import GF_TO_N
 from . import engine_runs
 from .checks_text import lookalike_notes
 from .fit import bootstrap_ci
 from .nulls import ci_of
-from .onsets import detect_early_contact, detect_onset
+from .onsets import detect_early_contact, detect_onset, ramp_is_the_cane
 from .screen import trial_geometry
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, MIN_CHANGE, drop_unsupported, forward_select
@@ -317,7 +318,10 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             e = detect_early_contact(rig.displacement_mm, rig.force_gf, fr.fit.onset_mm)
             if e is not None:
                 early[tid] = e
-                onsets.pop(tid, None)
+    geoms = {t.id: trial_geometry(t, cfg0) for t in trials}
+    early, drifts = _ramps_that_are_the_cane(early, trials, geoms, fields0, onsets)
+    for tid in early:
+        onsets.pop(tid, None)
     obstruction = ()
     if len(onsets) >= MIN_OBSTRUCTED:
         obstruction = (EffectSpec("obstruction", (), tuple(sorted((k, (("onset_mm", v),)) for k, v in onsets.items())),
@@ -339,7 +343,6 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
 
     # -- screening geometry
     t2 = time.perf_counter()
-    geoms = {t.id: trial_geometry(t, cfg0) for t in trials}
     feats = _features(trials, geoms, fields)
     feats["obstruction_onset_mm"] = [onsets[t] if t in onsets else early[t].onset_mm if t in early else math.nan
                                      for t in feats.trial]
@@ -462,6 +465,11 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     if early:
         notes.append(f"{len(early)} trial(s) left out of the fit: a soft contact ramp before the field stage's "
                      f"contact knee, which is an obstruction's onset ({', '.join(sorted(early))})")
+    if drifts:
+        notes.append(f"{len(drifts)} trial(s) rise slowly before their contact knee, far below what the cane's other "
+                     "pushes and the model give for the cane, while the slope after the knee is what they give: read "
+                     f"as the load cell drifting before contact, not as a contact before an obstruction; scored as "
+                     f"usual ({', '.join(sorted(drifts))})")
     timing["bootstrap_s"] = time.perf_counter() - t4
 
     # -- is it an explanation?
@@ -525,6 +533,39 @@ def unscored_onsets(onsets: dict[str, float], fields: dict) -> dict[str, str]:
         if fr is None or fr.fit is None or not fr.fit.usable:
             out[tid] = (fr.reason if fr is not None else "") or "no field fit"
     return out
+
+
+def _ramps_that_are_the_cane(early: dict, trials: list, geoms: dict, fields: dict,
+                             onsets: dict) -> tuple[dict, dict]:
+    """Split early-contact candidates into contacts (the ramp is the cane) and drifts.
+
+    A candidate's levels are the median ln(k_field / k_model) of its cane's other pushes with a
+    usable slope and neither an onset nor a candidate of their own, and the median of every such
+    push in the data (k_model: the baseline's linear compliance, :meth:`TrialGeometry.compliance`).
+    It is a drift only when neither level puts the cane nearer the ramp's slope than the slope
+    after the knee (:func:`onsets.ramp_is_the_cane`): a cane's other push can carry an elbow no
+    test found (a self-test cane's did, 2.1 in ln above the model), and the data's median alone
+    would ignore how much real canes differ from one another.
+    """
+    if not early:
+        return early, {}
+    cane_of = {t.id: t.cane.id for t in trials}
+    k_model = {tid: 1e-3 / g.compliance()[0] for tid, g in geoms.items()}  # N/mm
+    resid: dict[str, list[float]] = {}
+    for tid, fr in fields.items():
+        k = fr.k
+        if tid in early or tid in onsets or not (np.isfinite(k) and k > 0 and k_model[tid] > 0):
+            continue
+        resid.setdefault(cane_of[tid], []).append(math.log(k / k_model[tid]))
+    pooled = [v for vs in resid.values() for v in vs]
+    kept, drifts = {}, {}
+    for tid, e in early.items():
+        levels = [float(np.median(v)) for v in (resid.get(cane_of[tid]), pooled) if v]
+        if not levels or any(ramp_is_the_cane(e, k_model[tid] / GF_TO_N, lv) for lv in levels):
+            kept[tid] = e
+        else:
+            drifts[tid] = e
+    return kept, drifts
 
 
 def field_onsets(fields: dict) -> dict[str, float]:
