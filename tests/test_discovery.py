@@ -292,6 +292,15 @@ def test_a_load_cell_drifting_before_contact_is_not_a_contact_before_an_obstruct
     assert set(kept) == {"c1t0"}  # the data's level still places the cane at the ramp
     kept, drifts = _ramps_that_are_the_cane({"c0t0": e}, trials, geoms, {}, {})
     assert set(kept) == {"c0t0"}  # no level at all: as before
+    # pushes with an onset of their own give no level: c0's other two pushes read 8x below the
+    # model (as a cane's own level that would keep its ramp); with onsets there, only the data's
+    # level is left, and it calls the ramp a drift
+    fields = {t.id: SimpleNamespace(k=k_cane[t.cane.id] * gf) for t in trials}
+    fields["c0t1"] = fields["c0t2"] = SimpleNamespace(k=3.0 / 8 * gf)
+    kept, drifts = _ramps_that_are_the_cane({"c0t0": e}, trials, geoms, fields, {})
+    assert set(kept) == {"c0t0"}
+    kept, drifts = _ramps_that_are_the_cane({"c0t0": e}, trials, geoms, fields, {"c0t1": 10.0, "c0t2": 12.0})
+    assert set(drifts) == {"c0t0"}
 
 
 @pytest.mark.field

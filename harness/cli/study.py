@@ -42,7 +42,8 @@ def main(a: argparse.Namespace) -> int:
         usable, skipped = common.backends(a.backends or "pinocchio")
     ignored = ignored_options(a)
     if ignored:
-        why = "it simulates nothing and resumes nothing" if not simulates else "it reads no bending dataset"
+        why = {"contact": "it reads --field and simulates nothing", "modulus": "it reads --data and simulates nothing"
+               }.get(a.name, "it reads no bending dataset")
         print(f"note: study {a.name} leaves {', '.join(ignored)} aside ({why})", file=sys.stderr)
     out = common.out_dir(a.out, f"study-{a.name}")
     t0 = time.perf_counter()
