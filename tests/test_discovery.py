@@ -252,7 +252,7 @@ def test_a_soft_contact_hidden_in_the_tare_stretch_is_an_obstruction():
 def test_a_load_cell_drifting_before_contact_is_not_a_contact_before_an_obstruction():
     """A load cell settling by +5 gf (time constant 6 mm) from the record's start, then a cane of
     3 gf/mm from 11 mm: the trace's shape alone reads a soft ramp, then a slope 5-10 times
-    steeper, as a contact before a second body (an independent generator's drifts gave 15 such
+    steeper, as a contact before a second body (an independent generator's drifts gave 14 such
     false obstructions in 16 sets). The model places the cane: the slope after the knee is
     what the cane's other pushes give, so the ramp is a drift; the soft contact of the test
     above keeps its ramp. Both hold with the model 2x off, as long as the cane's other pushes

@@ -166,7 +166,7 @@ def ramp_is_the_cane(e: EarlyContact, k_model_gf_mm: float, level: float) -> boo
 
     A load cell that settles after the rig starts logging drifts by a few gf over the first
     millimetres: a slow ramp, then the real contact's far steeper slope, the shape of a soft
-    contact before a second body (an independently generated set's drifts of 2-7 gf gave 15
+    contact before a second body (an independently generated set's drifts of 2-7 gf gave 14
     such ramps in 16 datasets, each named an obstruction at its true contact). Which of the two
     slopes is the cane's the model tells, through the cane's other pushes: ``level`` is the
     ln(k_field / k_model) they show (the cane's own modulus and whatever the model misses
