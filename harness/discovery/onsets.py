@@ -172,8 +172,8 @@ def ramp_is_the_cane(e: EarlyContact, k_model_gf_mm: float, level: float) -> boo
     ln(k_field / k_model) they show (the cane's own modulus and whatever the model misses
     there), and the ramp is the cane's when its ln(slope / k_model) is at least as near that
     level as the slope after the knee's. A contact followed by a second body leaves the ramp
-    at the cane's level and the slope after above it; a drift leaves the ramp one to four
-    units of ln below it and the slope after at it.
+    at the cane's level and the slope after above it; a drift leaves the ramp 1.5 to 6 units
+    of ln below it and the slope after near it (``tests/scripts/early_contacts.py``).
 
     Parameters
     ----------

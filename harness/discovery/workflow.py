@@ -344,7 +344,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     timing["baseline_s"] = time.perf_counter() - t1
     k_base = dict(zip(res.trial, res.k_sim.where(res.status == "ok")))
 
-    # -- screening geometry
+    # -- screening features (the geometry was built with the field stage)
     t2 = time.perf_counter()
     feats = _features(trials, geoms, fields)
     feats["obstruction_onset_mm"] = [onsets[t] if t in onsets else early[t].onset_mm if t in early else math.nan
