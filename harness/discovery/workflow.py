@@ -103,7 +103,7 @@ from . import engine_runs
 from .checks_text import lookalike_notes
 from .fit import bootstrap_ci
 from .nulls import ci_of
-from .onsets import detect_early_contact, detect_onset, ramp_is_the_cane
+from .onsets import EarlyContact, detect_early_contact, detect_onset, ramp_is_the_cane
 from .screen import trial_geometry
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, MIN_CHANGE, drop_unsupported, forward_select
@@ -309,16 +309,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     onsets = field_onsets(fields0)
     # a soft contact the field stage took for the tare: its knee is the obstruction's onset, and
     # its stiffness the obstruction's; such trials cannot be scored and are left out of the fit
-    early: dict[str, Any] = {}
-    by_id = {t.id: t for t in trials}
-    for tid, fr in fields0.items():
-        # (a trace fitted poorly as a whole is searched too: with an elbow it is scored up to it)
-        if fr.fit is not None and fr.fit.rises and by_id[tid].csv is not None and np.isfinite(fr.fit.onset_mm):
-            rig = read_rig_csv(by_id[tid].csv)
-            e = detect_early_contact(rig.displacement_mm, rig.force_gf, fr.fit.onset_mm)
-            if e is not None:
-                early[tid] = e
-    timing["field_s"] = time.perf_counter() - t_start
+    early = early_contacts(fields0)
     t_g = time.perf_counter()  # the screen's geometry, needed here to tell a drift from a contact
     geoms = {t.id: trial_geometry(t, cfg0) for t in trials}
     timing["geometry_s"] = time.perf_counter() - t_g
@@ -334,7 +325,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     # an elbow is reported wherever it is found; a trial whose trace is still no line up to it
     # (noise, not the elbow, spoiled the fit) is not scored, and says why
     unscored = unscored_onsets(onsets, fields)
-    timing["field_s"] += time.perf_counter() - t_g - timing["geometry_s"]
+    timing["field_s"] = time.perf_counter() - t_start - timing["geometry_s"]
 
     # -- baseline simulation through the runner
     t1 = time.perf_counter()
@@ -538,32 +529,57 @@ def unscored_onsets(onsets: dict[str, float], fields: dict) -> dict[str, str]:
     return out
 
 
+def early_contacts(fields: dict) -> dict[str, EarlyContact]:
+    """Soft contact ramps before the field stage's contact knee (:func:`onsets.detect_early_contact`),
+    by trial id: candidates, which :func:`_ramps_that_are_the_cane` splits into contacts and drifts."""
+    early = {}
+    for tid, fr in fields.items():
+        # (a trace fitted poorly as a whole is searched too: with an elbow it is scored up to it)
+        if fr.fit is not None and fr.fit.rises and fr.trial.csv is not None and np.isfinite(fr.fit.onset_mm):
+            rig = read_rig_csv(fr.trial.csv)
+            e = detect_early_contact(rig.displacement_mm, rig.force_gf, fr.fit.onset_mm)
+            if e is not None:
+                early[tid] = e
+    return early
+
+
+def contact_levels(trials: list, geoms: dict, fields: dict,
+                   exclude: set[str]) -> tuple[dict[str, float], dict[str, list[float]], list[float]]:
+    """The model's stiffness per trial and the levels ln(k_field / k_model) an early contact is judged by.
+
+    Returns k_model (N/mm, the baseline's linear compliance, :meth:`TrialGeometry.compliance`;
+    NaN where that is not positive), each cane's ln ratios over its pushes with a usable slope
+    outside ``exclude`` (pushes with an onset or a candidate of their own), and all of them pooled.
+    """
+    cane_of = {t.id: t.cane.id for t in trials}
+    k_model = {tid: 1e-3 / c if (c := g.compliance()[0]) > 0 else math.nan for tid, g in geoms.items()}
+    by_cane: dict[str, list[float]] = {}
+    for tid, fr in fields.items():
+        k = fr.k
+        if tid in exclude or not (np.isfinite(k) and k > 0 and np.isfinite(k_model[tid])):
+            continue
+        by_cane.setdefault(cane_of[tid], []).append(math.log(k / k_model[tid]))
+    return k_model, by_cane, [v for vs in by_cane.values() for v in vs]
+
+
 def _ramps_that_are_the_cane(early: dict, trials: list, geoms: dict, fields: dict,
                              onsets: dict) -> tuple[dict, dict]:
     """Split early-contact candidates into contacts (the ramp is the cane) and drifts.
 
-    A candidate's levels are the median ln(k_field / k_model) of its cane's other pushes with a
-    usable slope and neither an onset nor a candidate of their own, and the median of every such
-    push in the data (k_model: the baseline's linear compliance, :meth:`TrialGeometry.compliance`).
-    It is a drift only when neither level puts the cane nearer the ramp's slope than the slope
-    after the knee (:func:`onsets.ramp_is_the_cane`): a cane's other push can carry an elbow no
-    test found (a self-test cane's did, 2.1 in ln above the model), and the data's median alone
-    would ignore how much real canes differ from one another.
+    A candidate's levels are the median ln(k_field / k_model) of its cane's other pushes and of
+    every push in the data (:func:`contact_levels`). It is a drift only when neither level puts
+    the cane nearer the ramp's slope than the slope after the knee
+    (:func:`onsets.ramp_is_the_cane`): a cane's other push can carry an elbow no test found (a
+    self-test cane's did, 2.1 in ln above the model), and the data's median alone would ignore
+    how much real canes differ from one another.
     """
     if not early:
         return early, {}
     cane_of = {t.id: t.cane.id for t in trials}
-    k_model = {tid: 1e-3 / c if (c := g.compliance()[0]) > 0 else math.nan for tid, g in geoms.items()}  # N/mm
-    resid: dict[str, list[float]] = {}
-    for tid, fr in fields.items():
-        k = fr.k
-        if tid in early or tid in onsets or not (np.isfinite(k) and k > 0 and np.isfinite(k_model[tid])):
-            continue
-        resid.setdefault(cane_of[tid], []).append(math.log(k / k_model[tid]))
-    pooled = [v for vs in resid.values() for v in vs]
+    k_model, by_cane, pooled = contact_levels(trials, geoms, fields, set(early) | set(onsets))
     kept, drifts = {}, {}
     for tid, e in early.items():
-        levels = [float(np.median(v)) for v in (resid.get(cane_of[tid]), pooled) if v]
+        levels = [float(np.median(v)) for v in (by_cane.get(cane_of[tid]), pooled) if v]
         if not levels or any(ramp_is_the_cane(e, k_model[tid] / GF_TO_N, lv) for lv in levels):
             kept[tid] = e
         else:
