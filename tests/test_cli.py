@@ -66,6 +66,12 @@ def test_bad_inputs_exit_2_with_message(tmp_path: Path, capsys):
                  "--out", str(tmp_path / "d")]) == 2
     err = capsys.readouterr().err
     assert "--selftest-cases" in err and "--backends, --alpha do not apply" in err
+    from canebench.cli.common import default_jobs
+
+    # the suite's processes are --workers; the executor's options are named too (they were not read)
+    assert main(["discover", "--selftest", "--selftest-cases", "zz*", "--executor", "serial", "--jobs", str(default_jobs() + 1),
+                 "--out", str(tmp_path / "d")]) == 2
+    assert "--executor, --jobs do not apply" in capsys.readouterr().err
     assert not (tmp_path / "d").exists()
 
 

@@ -17,15 +17,32 @@ def default_jobs() -> int:
     return max(1, os.cpu_count() or 1)
 
 
-def add_executor_options(p: argparse.ArgumentParser) -> None:
+#: the execution options' defaults but ``--jobs`` (every core: :func:`default_jobs`), for the parser and
+#: for a command that says which options it leaves aside (``study``)
+EXECUTOR_DEFAULTS = {"executor": "local", "scheduler": None, "timeout": 600.0}
+
+
+def add_executor_options(p: argparse.ArgumentParser, store: bool = True) -> None:
+    """The execution options; ``store=False`` for a command that keeps no run store of its own
+    (``discover``: no per-job time limit, nothing to start afresh, its own progress lines)."""
     g = p.add_argument_group("execution")
-    g.add_argument("--executor", default="local", help="local (process pool, default), dask, or serial")
+    g.add_argument("--executor", default=EXECUTOR_DEFAULTS["executor"],
+                   help="local (process pool, default), dask, or serial")
     g.add_argument("--jobs", type=int, default=default_jobs(),
                    help="worker processes (local) or LocalCluster workers (dask); default: every core")
-    g.add_argument("--scheduler", help="dask scheduler address (tcp://HOST:PORT); default: start a LocalCluster")
-    g.add_argument("--timeout", type=float, default=600.0, help="per-job time limit in seconds (default 600; 0: none)")
+    g.add_argument("--scheduler", default=EXECUTOR_DEFAULTS["scheduler"],
+                   help="dask scheduler address (tcp://HOST:PORT); default: start a LocalCluster")
+    if not store:
+        return
+    g.add_argument("--timeout", type=float, default=EXECUTOR_DEFAULTS["timeout"],
+                   help=f"per-job time limit in seconds (default {EXECUTOR_DEFAULTS['timeout']:g}; 0: none)")
     g.add_argument("--fresh", action="store_true", help="ignore the run folder's store and start over")
     g.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def names(spec: str | None) -> list[str]:
+    """The names of a comma-separated option (``--backends a, b,``: ``['a', 'b']``); none for ``None``."""
+    return [n.strip() for n in (spec or "").split(",") if n.strip()]
 
 
 def add_model_options(p: argparse.ArgumentParser) -> None:
@@ -122,7 +139,7 @@ def assumptions(trials: list, config: Any) -> list[str]:
 def backends(spec: str) -> tuple[list[str], dict[str, str]]:
     from ..registry import select
 
-    usable, skipped = select([n.strip() for n in spec.split(",") if n.strip()])
+    usable, skipped = select(names(spec))
     for n, why in skipped.items():
         print(f"skipping backend {n}: {why}", file=sys.stderr)
     return usable, skipped

@@ -26,10 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=7, help="self-test seed")
     p.add_argument("--workers", type=int, default=2, help="self-test processes")
     p.add_argument("--selftest-cases", help="self-test: comma-separated globs on case ids (default: all 40)")
-    g = p.add_argument_group("execution")
-    g.add_argument("--executor", default="local", help="local (default), serial or dask")
-    g.add_argument("--jobs", type=int, default=__import__("os").cpu_count() or 1)
-    g.add_argument("--scheduler")
+    common.add_executor_options(p, store=False)
     p.set_defaults(fn=main)
 
 
@@ -41,7 +38,10 @@ def main(a: argparse.Namespace) -> int:
         ignored = [opt for opt, v, default in (
             ("--field", a.field, None), ("--trials", a.trials, None), ("--baseline", a.baseline, "beam"), ("--backends", a.backends, None),
             ("--candidates", a.candidates, None), ("--alpha", a.alpha, 0.05), ("--min-change", a.min_change, 0.05),
-            ("--bootstrap", a.bootstrap, 100), ("--no-confirm", a.no_confirm, False)) if v != default]
+            ("--bootstrap", a.bootstrap, 100), ("--no-confirm", a.no_confirm, False),
+            # each case runs serially in one of --workers processes
+            ("--executor", a.executor, common.EXECUTOR_DEFAULTS["executor"]), ("--jobs", a.jobs, common.default_jobs()),
+            ("--scheduler", a.scheduler, common.EXECUTOR_DEFAULTS["scheduler"])) if v != default]
         if ignored:
             print(f"note: the self-test runs the default workflow on its own datasets: {', '.join(ignored)} "
                   "do not apply", file=sys.stderr)
@@ -68,8 +68,8 @@ def main(a: argparse.Namespace) -> int:
 
     _, trials = common.trials(a)
     ex = common.executor(argparse.Namespace(executor=a.executor, jobs=a.jobs, scheduler=a.scheduler))
-    backends = [b.strip() for b in a.backends.split(",") if b.strip()] if a.backends else None
-    cands = tuple(c.strip() for c in a.candidates.split(",")) if a.candidates else None
+    backends = common.names(a.backends) or None
+    cands = tuple(common.names(a.candidates)) or None
     res = discover(trials, a.baseline, backends, a.out, ex, cands, a.alpha, a.bootstrap, confirm=not a.no_confirm,
                    progress=Progress(), min_change=a.min_change)
     doc = res.to_json()

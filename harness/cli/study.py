@@ -116,7 +116,7 @@ _UNREAD = {"contact": ("--data", "--trials", "--strict", "--backends", "--protoc
 
 def ignored_options(a: argparse.Namespace) -> list[str]:
     """The options given on the command line that study ``a.name`` does not read, in ``_UNREAD``'s order."""
-    defaults = {"--executor": "local", "--jobs": common.default_jobs(), "--timeout": 600.0}
+    defaults = {**{f"--{k}": v for k, v in common.EXECUTOR_DEFAULTS.items()}, "--jobs": common.default_jobs()}
     out = []
     for opt in _UNREAD[a.name]:
         v = getattr(a, opt[2:].replace("-", "_"))
