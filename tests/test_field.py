@@ -133,6 +133,8 @@ def test_nan_row_named(tmp_path):
 
 
 def test_non_numeric_and_non_monotonic(tmp_path):
+    from canebench.errors import InputWarning
+
     p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,abc,10.5,800\n")
     with pytest.raises(InputError, match=r"row 3: not a finite number \('abc'\)"):
         read_rig_csv(p)
@@ -142,9 +144,37 @@ def test_non_numeric_and_non_monotonic(tmp_path):
         with pytest.raises(InputError, match=r"row 4: not a finite number \(empty or NA\)") as e:
             read_rig_csv(p)
         assert e.value.field == "Load Cell Reading (gf)"
-    p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,4,10,800\n3,1000,4,11,800\n")
-    with pytest.raises(InputError, match="does not increase"):
+    p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,4,10.5,800\n3,1000,4,10,800\n")
+    with pytest.raises(InputError, match=r"row 4: displacement does not increase \(it goes back from 10.5 to 10\)"):
         read_rig_csv(p)
+    p = _write(tmp_path, HEADER + "1,0,3.0,10,800\n2,500,4,10,800\n3,1000,4,10,800\n")
+    with pytest.warns(InputWarning, match="repeat the previous position"), \
+            pytest.raises(InputError, match="the probe never moves"):
+        read_rig_csv(p)
+
+
+def test_a_sample_logged_twice_at_one_position_is_merged(tmp_path):
+    """A repeated position (the logger ran while the stepper did not step) is one sample with the
+    readings' mean, and a warning names the file, the column and the row; the trace's slope is
+    the one without the repeat."""
+    from canebench.errors import InputWarning
+
+    rows, t = [], 0
+    for i in range(40):
+        f = -50.0 + max(0, i - 5) * 3.0
+        rows.append(f"{len(rows) + 2},{t},{f},{100 + 0.5 * i},700")
+        t += 500
+        if i in (12, 30):  # logged again at the same position, reading 1 gf higher
+            rows.append(f"{len(rows) + 2},{t},{f + 1.0},{100 + 0.5 * i},700")
+            t += 500
+    p = _write(tmp_path, HEADER + "\n".join(rows) + "\n")
+    with pytest.warns(InputWarning, match=r"2 sample\(s\) repeat the previous position \(row\(s\) 15, 34\)"):
+        tr = read_rig_csv(p)
+    assert len(tr.displacement_mm) == 40 and np.all(np.diff(tr.displacement_mm) == 0.5)
+    assert tr.force_gf[12] == pytest.approx(-50.0 + 7 * 3.0 + 0.5)  # the mean of the two readings
+    assert tr.time_s[12] == pytest.approx(6.25)  # and of their times
+    ff = extract_field_stiffness(tr)
+    assert ff.usable and ff.k_n_per_mm == pytest.approx(6.0 * 9.80665e-3, rel=2e-3)
 
 
 def test_clean_synthetic_ramp_recovered_exactly(tmp_path):

@@ -5,8 +5,10 @@ Rig CSV columns (see ../shared/field-data/README.md): ``Iteration``,
 (compressive positive, with a tare offset), ``Displacement (mm)`` (absolute
 probe position, 0.5 mm per sample), ``Height (mm)``.
 
-Every column must be present and numeric; a NaN or a non-monotonic
-displacement is an error naming the file, row and column. Time stamps are
+Every column must be present and numeric; a NaN or a displacement that
+goes back is an error naming the file, row and column. A sample that
+repeats the previous position (logged twice while the stepper did not step)
+is merged with it, their readings averaged, with a warning. Time stamps are
 unwrapped (add 65536 at each negative jump) only to report the trial's
 duration; physics uses displacement, which the stepper sets exactly.
 Displacement is made relative to the first sample: the rig logs an absolute
@@ -68,14 +70,31 @@ def read_rig_csv(path: str | Path) -> RigTrial:
             raise InputError(src, col, f"row {i + 2}: not a finite number ({cell_text(df[col].iloc[i])})")
         out[key] = vals
     disp = out["disp"] - out["disp"][0]
-    step = float(np.median(np.diff(disp))) if len(disp) > 1 else 0.0
-    if 0 < step < 0.01:
-        warn_input(src, COLUMNS["disp"], f"median step {step:.3g} per sample: the rig steps 0.5 mm, so this "
-                                         "looks like metres, not mm")
-    if np.any(np.diff(disp) <= 0):
-        i = int(np.argmax(np.diff(disp) <= 0)) + 1
-        raise InputError(src, COLUMNS["disp"], f"row {i + 2}: displacement does not increase")
+    d = np.diff(disp)
+    if np.any(d < 0):
+        i = int(np.argmax(d < 0)) + 1
+        raise InputError(src, COLUMNS["disp"], f"row {i + 2}: displacement does not increase (it goes back "
+                                               f"from {out['disp'][i - 1]:g} to {out['disp'][i]:g})")
     t = out["time"].copy()
     jumps = np.diff(t)
     t[1:] += 65536.0 * np.cumsum(jumps < -32768)  # 16-bit counter wrapped
-    return RigTrial(src, disp, out["force"], (t - t[0]) / 1000.0, float(np.median(out["height"])))
+    force = out["force"]
+    if np.any(d == 0):
+        # a sample logged twice at one probe position (the logger ran while the stepper did not
+        # step): one position, one reading, their mean; the fit and the elbow searches take one
+        # sample per position
+        rows = np.flatnonzero(d == 0) + 1
+        group = np.concatenate([[0], np.cumsum(d > 0)])
+        n = np.bincount(group)
+        force, t = np.bincount(group, force) / n, np.bincount(group, t) / n
+        disp = disp[np.concatenate([[True], d > 0])]
+        warn_input(src, COLUMNS["disp"], f"{len(rows)} sample(s) repeat the previous position (row(s) "
+                                         f"{', '.join(str(r + 2) for r in rows[:5])}{', ...' if len(rows) > 5 else ''}"
+                                         "); each position's readings are averaged")
+    if len(disp) < 2:
+        raise InputError(src, COLUMNS["disp"], "the probe never moves")
+    step = float(np.median(np.diff(disp)))
+    if step < 0.01:
+        warn_input(src, COLUMNS["disp"], f"median step {step:.3g} per sample: the rig steps 0.5 mm, so this "
+                                         "looks like metres, not mm")
+    return RigTrial(src, disp, force, (t - t[0]) / 1000.0, float(np.median(out["height"])))
