@@ -136,3 +136,21 @@ def test_bench_engines_times_the_engines_named(capsys):
     out = capsys.readouterr().out
     rows = out.split("backend", 1)[1].splitlines()[1:]
     assert [r.split()[0] for r in rows if r.strip() and not r.startswith("total")] == ["mujoco"], out
+
+
+def test_an_input_warning_is_shown_once_per_message_not_once_per_read(capsys):
+    """discover reads a rig CSV in several stages: each file's warning is one line, and two
+    files' warnings from the same code line are two (the "default" filter would keep one)."""
+    import warnings
+
+    from canebench.cli.common import input_warnings
+    from canebench.errors import warn_input
+
+    with warnings.catch_warnings():  # restores the filters and showwarning
+        input_warnings(strict=False)
+        for _ in range(3):
+            for f in ("a.csv", "b.csv"):
+                warn_input(f, "Displacement (mm)", "1 sample(s) repeat the previous position")
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"canebench: warning: {f}: field 'Displacement (mm)': 1 sample(s) repeat the previous position"
+                   for f in ("a.csv", "b.csv")]

@@ -66,9 +66,15 @@ def input_warnings(strict: bool) -> None:
 
     from ..errors import InputWarning
 
+    shown: set[str] = set()
+
     def show(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
         if issubclass(category, InputWarning):
-            print(f"canebench: warning: {message}", file=sys.stderr)
+            # a file is read by several stages (discover reads a rig CSV a dozen times): said once.
+            # Not the "default" filter: it keeps one warning per code line, so one per kind, not per file
+            if str(message) not in shown:
+                shown.add(str(message))
+                print(f"canebench: warning: {message}", file=sys.stderr)
         else:
             print(warnings.formatwarning(message, category, filename, lineno, line), file=sys.stderr, end="")
 
