@@ -249,6 +249,71 @@ def test_a_soft_contact_hidden_in_the_tare_stretch_is_an_obstruction():
     assert rounded == []
 
 
+def test_an_elbow_inside_the_knee_search_does_not_pull_the_contact_late(tmp_path):
+    """A soft cane (2.4 gf/mm from 6 mm) meets a second body 16 mm later (9.4 gf/mm after): the
+    field stage's flat-then-line knee, searched until the force has risen 150 gf, spans ramp
+    and elbow with one line and lands inside the ramp, so the onset counted from it is too
+    early (an independent generator's softest obstructed trials: 6-10 mm), and the early-contact
+    check takes the ramp before the knee for a soft cane before a second body at the knee. The
+    record up to the elbow puts contact and onset where they are, its slope is the cane's, the
+    early-contact check searches before that contact (and finds nothing), and the field stage
+    given the cut reads the same fit. A stiff cane whose elbow lies beyond the knee's search
+    keeps its knee and onset. A third body on a soft cane (a ramp of 0.5 gf/mm from 6 mm, a
+    second body at 22 mm, a third at 34 mm) moves the contact to the second body, and the ramp
+    before it is an early contact there."""
+    from types import SimpleNamespace
+
+    from canebench.discovery.workflow import contacts_before_elbows, early_contacts, field_onsets
+    from canebench.execute.pipeline import FieldResult, field_fit_for
+    from canebench.measure.field import extract_field_stiffness
+    from canebench.model.config import ModelConfig
+    from canebench.model.effects import EffectSpec
+
+    rng = np.random.default_rng(3)
+    x = np.arange(0, 60, 0.5)
+    cases = {"soft": (6.0, 2.4, 16.0, 7.0, 0.0), "stiff": (6.0, 12.0, 16.0, 24.0, 0.0),
+             "third": (6.0, 0.5, 16.0, 2.5, 9.0)}  # contact, slope, onset, added, added by a third body
+    fields, rows = {}, ["Iteration,Time Stamp,Load Cell Reading (gf),Displacement (mm),Height (mm)"]
+    for name, (c, k, o, k2, k3) in cases.items():
+        f = (-40.0 + k * np.maximum(x - c, 0) + k2 * np.maximum(x - c - o, 0) + k3 * np.maximum(x - 34.0, 0)
+             + rng.normal(0, 0.3 if k3 else 0.5, len(x)))
+        f = f[f < 1000.0]
+        csv = tmp_path / f"{name}.csv"
+        csv.write_text("\n".join(rows + [f"{i + 2},{500 * i},{v:.2f},{100 + x[i]},700" for i, v in enumerate(f)]))
+        ff = extract_field_stiffness(_rig(x[: len(f)], f))
+        fields[name] = FieldResult(SimpleNamespace(csv=csv), ff, ff.reason)
+    assert fields["soft"].fit.onset_mm > 6.0 + 3.0  # the bias: the knee inside the ramp
+    assert abs(fields["stiff"].fit.onset_mm - 6.0) <= 1.0
+    onsets = field_onsets(fields)
+    assert {"soft", "stiff"} <= set(onsets)
+    assert onsets["soft"] < 16.0 - 3.0
+    moved = contacts_before_elbows(onsets, fields)
+    assert set(moved) == set(onsets) - {"stiff"}
+    ff = moved["soft"].fit
+    assert abs(ff.onset_mm - 6.0) <= 1.0
+    assert abs(moved["soft"].onset_mm - 16.0) <= 1.0
+    assert abs(moved["soft"].record_end_mm - 22.0) <= 1.0
+    assert ff.k_n_per_mm == pytest.approx(2.4 * 9.80665e-3, rel=0.05)
+    assert abs(onsets["stiff"] - 16.0) <= 1.0
+    # the obstruction effect carries the cut: the field stage of any run reads the same fit
+    spec = EffectSpec("obstruction", (), (("soft", (("onset_mm", moved["soft"].onset_mm),
+                                                    ("record_end_mm", moved["soft"].record_end_mm))),), "per_trial")
+    cfg = ModelConfig().replace(effects=(spec,))
+    assert cfg.record_end_mm("c", "soft") == moved["soft"].record_end_mm
+    assert cfg.record_end_mm("c", "stiff") is None
+    again = field_fit_for(fields["soft"].trial, cfg.fit_window_mm("c", "soft"), cfg.record_end_mm("c", "soft"))
+    assert (again.onset_mm, again.k_n_per_mm) == (ff.onset_mm, ff.k_n_per_mm)
+    # the ramp before the late knee, and the elbow after it, read as an early contact (a soft cane
+    # before a second body at the knee); before the moved contact there is no ramp
+    knees = {k: m.fit.onset_mm for k, m in moved.items()}
+    assert "soft" in early_contacts(fields)
+    assert "soft" not in early_contacts(fields, knees=knees)
+    # the third body's elbow moves the contact to the second body (the hinge's flat part is the
+    # ramp's mean, so its knee comes up to a few mm before 22), before which the cane's ramp is
+    assert 16.0 <= moved["third"].fit.onset_mm <= 22.5
+    assert abs(early_contacts(fields, knees=knees)["third"].contact_mm - 6.0) <= 1.0
+
+
 def test_a_load_cell_drifting_before_contact_is_not_a_contact_before_an_obstruction():
     """A load cell settling by +5 gf (time constant 6 mm) from the record's start, then a cane of
     3 gf/mm from 11 mm: the trace's shape alone reads a soft ramp, then a slope 5-10 times

@@ -177,6 +177,22 @@ def test_a_sample_logged_twice_at_one_position_is_merged(tmp_path):
     assert ff.usable and ff.k_n_per_mm == pytest.approx(6.0 * 9.80665e-3, rel=2e-3)
 
 
+def test_a_position_logged_three_times_at_the_start_keeps_the_first_row_as_the_clock_zero(tmp_path):
+    """The logger running before the stepper starts repeats the first position: the IMU's clock
+    counts from the CSV's first row (canes/IMU_FORMAT.md), so the merged first sample sits at its
+    rows' mean time (0.5 s for rows at 0, 0.5, 1.0 s), not at zero, and later samples keep theirs."""
+    from canebench.errors import InputWarning
+
+    rows = [f"{i + 2},{1000 + 500 * i},{-50.0 + i},{100.0},700" for i in range(3)]
+    rows += [f"{i + 2},{1000 + 500 * i},{-50.0 + 3.0 * (i - 2)},{100 + 0.5 * (i - 2)},700" for i in range(3, 30)]
+    p = _write(tmp_path, HEADER + "\n".join(rows) + "\n")
+    with pytest.warns(InputWarning, match=r"2 sample\(s\) repeat the previous position \(row\(s\) 3, 4\)"):
+        tr = read_rig_csv(p)
+    assert tr.time_s[:3] == pytest.approx([0.5, 1.5, 2.0])
+    assert tr.force_gf[0] == pytest.approx(-49.0)
+    assert tr.displacement_mm[:2] == pytest.approx([0.0, 0.5])
+
+
 def test_clean_synthetic_ramp_recovered_exactly(tmp_path):
     # flat dead zone (tare -50 gf) for 6 samples, then 3 gf per 0.5 mm
     rows, t = [], 32000

@@ -17,7 +17,7 @@ carriage position whose origin means nothing for the cane.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,9 +39,14 @@ class RigTrial:
     path: str
     displacement_mm: np.ndarray  # relative to first sample
     force_gf: np.ndarray  # raw reading
-    time_s: np.ndarray  # unwrapped, from 0
+    time_s: np.ndarray  # unwrapped, from the first row logged (a merged position: its rows' mean time)
     height_mm: float
 
+    def up_to(self, travel_mm: float) -> "RigTrial":
+        """The record up to ``travel_mm`` of travel from its first sample (that sample included)."""
+        keep = self.displacement_mm <= travel_mm + 1e-9
+        return replace(self, displacement_mm=self.displacement_mm[keep], force_gf=self.force_gf[keep],
+                       time_s=self.time_s[keep])
 
 
 def read_rig_csv(path: str | Path) -> RigTrial:
@@ -74,10 +79,11 @@ def read_rig_csv(path: str | Path) -> RigTrial:
     if np.any(d < 0):
         i = int(np.argmax(d < 0)) + 1
         raise InputError(src, COLUMNS["disp"], f"row {i + 2}: displacement does not increase (it goes back "
-                                               f"from {out['disp'][i - 1]:g} to {out['disp'][i]:g})")
+                                               f"from {out['disp'][i - 1]:.10g} to {out['disp'][i]:.10g})")
     t = out["time"].copy()
     jumps = np.diff(t)
     t[1:] += 65536.0 * np.cumsum(jumps < -32768)  # 16-bit counter wrapped
+    t0 = t[0]  # the clock's zero is the first row logged (the IMU's is too), merged or not
     force = out["force"]
     if np.any(d == 0):
         # a sample logged twice at one probe position (the logger ran while the stepper did not
@@ -97,4 +103,4 @@ def read_rig_csv(path: str | Path) -> RigTrial:
     if step < 0.01:
         warn_input(src, COLUMNS["disp"], f"median step {step:.3g} per sample: the rig steps 0.5 mm, so this "
                                          "looks like metres, not mm")
-    return RigTrial(src, disp, force, (t - t[0]) / 1000.0, float(np.median(out["height"])))
+    return RigTrial(src, disp, force, (t - t0) / 1000.0, float(np.median(out["height"])))

@@ -82,9 +82,10 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -93,6 +94,7 @@ from ..data.dataset import Trial
 from ..data.rig import read_rig_csv
 from ..execute.pipeline import SIM_TRAVEL_MM, field_stage
 from ..execute.runner import run_trials
+from ..measure.field import FORCE_LIMIT_GF, FieldFit, extract_field_stiffness
 from ..measure.fit import halves_slope_ratio
 from ..model.config import ModelConfig
 from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
@@ -307,19 +309,29 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     # -- field, obstruction onsets
     fields0 = field_stage(trials, proto.fit_window_mm)
     onsets = field_onsets(fields0)
+    # a knee pulled late by an elbow inside its search: onset and field fit from the record up to
+    # the elbow (the ramp before that knee is the cane's own, not an early contact)
+    recontact = contacts_before_elbows(onsets, fields0)
     # a soft contact the field stage took for the tare: its knee is the obstruction's onset, and
     # its stiffness the obstruction's; such trials cannot be scored and are left out of the fit
-    early = early_contacts(fields0)
+    early = early_contacts(fields0, knees={k: rc.fit.onset_mm for k, rc in recontact.items()})
     t_g = time.perf_counter()  # the screen's geometry, needed here to tell a drift from a contact
     geoms = {t.id: trial_geometry(t, cfg0) for t in trials}
     timing["geometry_s"] = time.perf_counter() - t_g
     early, drifts = _ramps_that_are_the_cane(early, trials, geoms, fields0, onsets)
     for tid in early:
         onsets.pop(tid, None)
+        recontact.pop(tid, None)
+    for tid, rc in recontact.items():
+        onsets[tid] = rc.onset_mm
     obstruction = ()
     if len(onsets) >= MIN_OBSTRUCTED:
-        obstruction = (EffectSpec("obstruction", (), tuple(sorted((k, (("onset_mm", v),)) for k, v in onsets.items())),
-                                  "per_trial"),)
+        # a moved contact's trial carries the record's cut, so every field stage reads it alike
+        obstruction = (EffectSpec("obstruction", (), tuple(sorted(
+            (k, (("onset_mm", v),) + ((("record_end_mm", recontact[k].record_end_mm),) if k in recontact else ()))
+            for k, v in onsets.items())), "per_trial"),)
+    else:
+        recontact = {}
     cfg_b = cfg0.replace(effects=obstruction)
     fields = field_stage(trials, proto.fit_window_mm, cfg_b)
     # an elbow is reported wherever it is found; a trial whose trace is still no line up to it
@@ -448,6 +460,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     if obstruction or early:
         local = {k: ({"onset_mm": v, "excluded": True, "reason": unscored[k]} if k in unscored else {"onset_mm": v})
                  for k, v in onsets.items()}
+        for k, rc in recontact.items():  # the contact the record up to the elbow puts earlier
+            local[k].update(contact_mm=rc.fit.onset_mm, record_end_mm=rc.record_end_mm)
         local.update({k: {"onset_mm": e.onset_mm, "contact_mm": e.contact_mm, "excluded": True}
                       for k, e in early.items()})
         named.append({"effect": "obstruction", "scope": "per_trial", "params": {},
@@ -459,6 +473,11 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     if early:
         notes.append(f"{len(early)} trial(s) left out of the fit: a soft contact ramp before the field stage's "
                      f"contact knee, which is an obstruction's onset ({', '.join(sorted(early))})")
+    if recontact:
+        notes.append(f"{len(recontact)} obstructed trial(s) touch earlier than the field stage's contact knee, which "
+                     "an elbow inside its search pulled late: onset and field stiffness from the record up to the "
+                     "elbow (" + ", ".join(f"{k}: contact {fields0[k].fit.onset_mm - rc.fit.onset_mm:.1f} mm earlier"
+                                           for k, rc in sorted(recontact.items())) + ")")
     if drifts:
         notes.append(f"{len(drifts)} trial(s) rise slowly before their contact knee, and the model's level for the cane "
                      "(its other pushes', and all pushes') is nearer the slope after the knee than that ramp: read as "
@@ -529,15 +548,79 @@ def unscored_onsets(onsets: dict[str, float], fields: dict) -> dict[str, str]:
     return out
 
 
-def early_contacts(fields: dict) -> dict[str, EarlyContact]:
+class Recontact(NamedTuple):
+    """An obstructed trial's contact moved before the field stage's knee (:func:`contacts_before_elbows`)."""
+
+    fit: FieldFit  #: the field fit of the record up to the elbow; its ``onset_mm`` is the contact
+    onset_mm: float  #: the elbow, mm after that contact
+    record_end_mm: float  #: the elbow, mm of travel from the record's first sample: where it is cut
+
+
+def contacts_before_elbows(onsets: dict[str, float], fields: dict) -> dict[str, Recontact]:
+    """The field fit of each obstructed trial's record up to its elbow, where that puts contact earlier.
+
+    The field stage's contact knee is a flat-then-line hinge over the record until the force has
+    risen 150 gf (:func:`~canebench.measure.field.extract_field_stiffness`). A soft cane's second
+    body can engage within that: the one line then spans the cane's ramp and the steeper rise
+    after the elbow, and the knee lands late, inside the ramp (an independent generator's softest
+    obstructed trials, 0.02-0.04 N/mm: 6-10 mm late, and their onsets, counted from it, as much too
+    early). Up to the elbow the record is flat, then the cane's line, and the same hinge finds the
+    contact there. The elbow itself was found on the trace from the late knee, whose tare and
+    origin were wrong: it is found again on the trace from the new contact (up to the rig's stop,
+    as :func:`field_onsets` searches), and the record cut there is fitted once more (a self-test
+    set's noisy 0.046 N/mm trial: the first cut kept three samples past the elbow, 0.072 N/mm; the
+    second, one, 0.054 N/mm). Returned, by trial id, where the contact is at least one sample
+    earlier than the knee and the record up to the elbow gives a usable slope. The obstruction
+    effect then carries the cut (``record_end_mm``) with the onset counted from that contact, so
+    every field stage of the run, the simulations' push lengths and the exported fits among them,
+    reads the trial the same way.
+    """
+    out: dict[str, Recontact] = {}
+    for tid, o in onsets.items():
+        fr = fields[tid]
+        rig = read_rig_csv(fr.trial.csv)
+
+        def up_to(end: float) -> FieldFit:
+            return extract_field_stiffness(rig.up_to(end), max_travel_mm=SIM_TRAVEL_MM)
+
+        elbow = fr.fit.onset_mm + o  # from the record's first sample, as the knee
+        ff = up_to(elbow)
+        if not (ff.usable and ff.onset_mm < fr.fit.onset_mm - 0.25):
+            continue
+        x = rig.displacement_mm
+        stop = rig.force_gf >= FORCE_LIMIT_GF
+        last = int(np.argmax(stop)) if stop.any() else len(x)
+        after = (x >= ff.onset_mm - 1e-9) & (np.arange(len(x)) < last)
+        xs = x[after] - ff.onset_mm
+        fs = (rig.force_gf[after] - ff.tare_gf) * GF_TO_N
+        within = xs <= SIM_TRAVEL_MM
+        again = detect_onset(xs[within], fs[within])
+        if again is not None:
+            ff2 = up_to(ff.onset_mm + again.onset_mm)
+            if ff2.usable and ff2.onset_mm < fr.fit.onset_mm - 0.25:
+                ff, elbow = ff2, ff.onset_mm + again.onset_mm
+        out[tid] = Recontact(ff, elbow - ff.onset_mm, elbow)
+    return out
+
+
+def early_contacts(fields: dict, knees: Mapping[str, float] | None = None) -> dict[str, EarlyContact]:
     """Soft contact ramps before the field stage's contact knee (:func:`onsets.detect_early_contact`),
-    by trial id: candidates, which :func:`_ramps_that_are_the_cane` splits into contacts and drifts."""
+    by trial id: candidates, which :func:`_ramps_that_are_the_cane` splits into contacts and drifts.
+
+    ``knees`` (mm of travel from the record's first sample, by trial id) replaces a trial's knee:
+    the contacts :func:`contacts_before_elbows` moved. Before the knee the field stage found, such
+    a trial's ramp is the cane's own and the steeper rise after it the elbow (an independent
+    generator's soft canes: two true obstructions were left out as early contacts, their onsets
+    5-6 mm early, while the old knee was searched); before the moved contact, a ramp is what it
+    is in any trial.
+    """
+    knees = knees or {}
     early = {}
     for tid, fr in fields.items():
         # (a trace fitted poorly as a whole is searched too: with an elbow it is scored up to it)
         if fr.fit is not None and fr.fit.rises and fr.trial.csv is not None and np.isfinite(fr.fit.onset_mm):
             rig = read_rig_csv(fr.trial.csv)
-            e = detect_early_contact(rig.displacement_mm, rig.force_gf, fr.fit.onset_mm)
+            e = detect_early_contact(rig.displacement_mm, rig.force_gf, knees.get(tid, fr.fit.onset_mm))
             if e is not None:
                 early[tid] = e
     return early

@@ -111,10 +111,14 @@ def trial_assumptions(trial: Trial, config: ModelConfig) -> str:
 SIM_TRAVEL_MM = Protocol.max_steps * Protocol.step_m * 1e3
 
 
-def field_fit_for(trial: Trial, window_mm: float | None = None) -> FieldFit | None:
+def field_fit_for(trial: Trial, window_mm: float | None = None, record_end_mm: float | None = None) -> FieldFit | None:
+    """The field fit of one trial's rig record, cut at ``record_end_mm`` of travel (an effect's)."""
     if trial.csv is None or not trial.csv.exists():
         return None
-    return extract_field_stiffness(read_rig_csv(trial.csv), window_mm=window_mm, max_travel_mm=SIM_TRAVEL_MM)
+    rig = read_rig_csv(trial.csv)
+    if record_end_mm is not None:
+        rig = rig.up_to(record_end_mm)
+    return extract_field_stiffness(rig, window_mm=window_mm, max_travel_mm=SIM_TRAVEL_MM)
 
 
 def field_stage(trials: Iterable[Trial], window_mm: float | None = None,
@@ -125,7 +129,8 @@ def field_stage(trials: Iterable[Trial], window_mm: float | None = None,
     a trace whose contact runs past :data:`SIM_TRAVEL_MM` (the registered protocols' push) is fitted
     over that much of it (flagged);
     a ``config`` whose effects shorten a trial's window (an obstruction onset)
-    shortens it here too, as :func:`run_job` does for the simulation.
+    shortens it here too, as :func:`run_job` does for the simulation, and one that cuts a trial's
+    record (an obstruction's ``record_end_mm``) fits the record up to there.
 
     Raises
     ------
@@ -140,7 +145,8 @@ def field_stage(trials: Iterable[Trial], window_mm: float | None = None,
         if t.csv is not None and not t.csv.exists():
             raise InputError(str(t.csv), "<file>", f"rig CSV of trial {t.id} not found")
         win = config.fit_window_mm(t.cane.id, t.id, window_mm) if config is not None else window_mm
-        ff = field_fit_for(t, win)
+        end = config.record_end_mm(t.cane.id, t.id) if config is not None else None
+        ff = field_fit_for(t, win, end)
         out[t.id] = FieldResult(t, ff, ff.reason if ff is not None else "no field trial")
     return out
 

@@ -7,8 +7,9 @@ probe position, 0.5 mm per sample), ``Height (mm)``.
 
 Extraction, step by step (each exists for a reason):
 
-1. Validate: every column present and numeric; a NaN or a non-monotonic
-   displacement is an error naming the file, row and column.
+1. Validate: every column present and numeric; a NaN or a displacement that
+   goes back is an error naming the file, row and column (a position logged
+   twice is merged, its readings averaged, with a warning).
 2. Time stamps are *unwrapped* (add 65536 at each negative jump) only to
    report the trial's duration; physics uses displacement, which the stepper
    sets exactly, so a wrapped counter cannot corrupt the slope.

@@ -226,6 +226,10 @@ class ModelConfig:
             return default
         return w if default is None else min(w, default)
 
+    def record_end_mm(self, cane_id: str | None, trial_id: str | None) -> float | None:
+        """Where one trial's rig record is cut (mm of travel from its first sample; None: nowhere)."""
+        return self.applied_effects(cane_id, trial_id).record_end_mm() if self.effects else None
+
 
 def _warn_implausible(changes: Mapping[str, Any], source: str) -> None:
     """The same unit checks as for cane files, for values set on the command line."""

@@ -131,6 +131,10 @@ class Effect:
         """Score this trial only over its first ... mm of contact (None: all of it)."""
         return None
 
+    def record_end_mm(self) -> float | None:
+        """Read this trial's rig record only up to this travel (mm from its first sample; None: all of it)."""
+        return None
+
 
 EFFECTS: Registry[type[Effect]] = Registry("physical effect")
 
@@ -215,11 +219,20 @@ class Obstruction(Effect):
     summary = "in some trials a second body engages partway (elbow): scored only up to onset_mm of contact"
     where = "trial"
     parameters = {"onset_mm": Parameter("mm", 1.0, 200.0, math.inf, False,
-                                        "displacement after contact at which the second body engages")}
+                                        "displacement after contact at which the second body engages"),
+                  "record_end_mm": Parameter("mm", 0.0, 1000.0, math.inf, False,
+                                             "where the field record is cut (travel from its first sample): set at "
+                                             "the elbow where the elbow hides the contact knee from the field "
+                                             "stage, so the contact is found before it", minimum=0.0,
+                                             switches_off=False)}
     scopes = ("per_trial",)
 
     def fit_window_mm(self) -> float | None:
         v = self.p["onset_mm"]
+        return v if math.isfinite(v) else None
+
+    def record_end_mm(self) -> float | None:
+        v = self.p["record_end_mm"]
         return v if math.isfinite(v) else None
 
 
@@ -412,6 +425,10 @@ class AppliedEffects:
 
     def fit_window_mm(self) -> float | None:
         w = [v for v in (e.fit_window_mm() for e in self.effects) if v is not None]
+        return min(w) if w else None
+
+    def record_end_mm(self) -> float | None:
+        w = [v for v in (e.record_end_mm() for e in self.effects) if v is not None]
         return min(w) if w else None
 
     @property

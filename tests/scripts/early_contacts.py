@@ -17,8 +17,8 @@ import numpy as np
 
 from canebench.data.dataset import load_dataset
 from canebench.discovery.screen import trial_geometry
-from canebench.discovery.workflow import (BASELINES, _ramps_that_are_the_cane, contact_levels, early_contacts,
-                                         field_onsets)
+from canebench.discovery.workflow import (BASELINES, _ramps_that_are_the_cane, contact_levels,
+                                         contacts_before_elbows, early_contacts, field_onsets)
 from canebench.execute.pipeline import field_stage
 from canebench.model.presets import PRESETS
 from canebench.probe.protocol import PROTOCOLS
@@ -31,7 +31,8 @@ def main() -> None:
         trials = load_dataset(root)
         fields = field_stage(trials, PROTOCOLS["fast"].fit_window_mm)
         onsets = field_onsets(fields)
-        early = early_contacts(fields)
+        moved = contacts_before_elbows(onsets, fields)
+        early = early_contacts(fields, knees={k: m.fit.onset_mm for k, m in moved.items()})
         if not early:
             print(f"{root}: {len(trials)} trials, no early contact")
             continue
