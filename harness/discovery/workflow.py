@@ -94,7 +94,7 @@ from ..data.dataset import Trial
 from ..data.rig import read_rig_csv
 from ..execute.pipeline import SIM_TRAVEL_MM, field_stage
 from ..execute.runner import run_trials
-from ..measure.field import FORCE_LIMIT_GF, FieldFit, extract_field_stiffness
+from ..measure.field import FieldFit, contact_samples, extract_field_stiffness
 from ..measure.fit import halves_slope_ratio
 from ..model.config import ModelConfig
 from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
@@ -105,7 +105,7 @@ from . import engine_runs
 from .checks_text import lookalike_notes
 from .fit import bootstrap_ci
 from .nulls import ci_of
-from .onsets import EarlyContact, detect_early_contact, detect_onset, ramp_is_the_cane
+from .onsets import EarlyContact, Onset, detect_early_contact, detect_onset, ramp_is_the_cane
 from .screen import trial_geometry
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, MIN_CHANGE, drop_unsupported, forward_select
@@ -330,8 +330,6 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         obstruction = (EffectSpec("obstruction", (), tuple(sorted(
             (k, (("onset_mm", v),) + ((("record_end_mm", recontact[k].record_end_mm),) if k in recontact else ()))
             for k, v in onsets.items())), "per_trial"),)
-    else:
-        recontact = {}
     cfg_b = cfg0.replace(effects=obstruction)
     fields = field_stage(trials, proto.fit_window_mm, cfg_b)
     # an elbow is reported wherever it is found; a trial whose trace is still no line up to it
@@ -552,8 +550,12 @@ class Recontact(NamedTuple):
     """An obstructed trial's contact moved before the field stage's knee (:func:`contacts_before_elbows`)."""
 
     fit: FieldFit  #: the field fit of the record up to the elbow; its ``onset_mm`` is the contact
-    onset_mm: float  #: the elbow, mm after that contact
     record_end_mm: float  #: the elbow, mm of travel from the record's first sample: where it is cut
+
+    @property
+    def onset_mm(self) -> float:
+        """The elbow, mm after the contact."""
+        return self.record_end_mm - self.fit.onset_mm
 
 
 def contacts_before_elbows(onsets: dict[str, float], fields: dict) -> dict[str, Recontact]:
@@ -588,18 +590,13 @@ def contacts_before_elbows(onsets: dict[str, float], fields: dict) -> dict[str, 
         if not (ff.usable and ff.onset_mm < fr.fit.onset_mm - 0.25):
             continue
         x = rig.displacement_mm
-        stop = rig.force_gf >= FORCE_LIMIT_GF
-        last = int(np.argmax(stop)) if stop.any() else len(x)
-        after = (x >= ff.onset_mm - 1e-9) & (np.arange(len(x)) < last)
-        xs = x[after] - ff.onset_mm
-        fs = (rig.force_gf[after] - ff.tare_gf) * GF_TO_N
-        within = xs <= SIM_TRAVEL_MM
-        again = detect_onset(xs[within], fs[within])
+        after = contact_samples(rig.force_gf, int(np.searchsorted(x, ff.onset_mm - 1e-9)))
+        again = _elbow(x[after] - ff.onset_mm, (rig.force_gf[after] - ff.tare_gf) * GF_TO_N)
         if again is not None:
             ff2 = up_to(ff.onset_mm + again.onset_mm)
             if ff2.usable and ff2.onset_mm < fr.fit.onset_mm - 0.25:
                 ff, elbow = ff2, ff.onset_mm + again.onset_mm
-        out[tid] = Recontact(ff, elbow - ff.onset_mm, elbow)
+        out[tid] = Recontact(ff, elbow)
     return out
 
 
@@ -670,6 +667,12 @@ def _ramps_that_are_the_cane(early: dict, trials: list, geoms: dict, fields: dic
     return kept, drifts
 
 
+def _elbow(x_mm: np.ndarray, f_n: np.ndarray) -> Onset | None:
+    """The elbow of a tared contact trace within the simulation's push (:data:`SIM_TRAVEL_MM`)."""
+    within = x_mm <= SIM_TRAVEL_MM
+    return detect_onset(x_mm[within], f_n[within])
+
+
 def field_onsets(fields: dict) -> dict[str, float]:
     """Obstruction onsets (mm after contact) in the field traces, by trial id.
 
@@ -683,8 +686,7 @@ def field_onsets(fields: dict) -> dict[str, float]:
     onsets: dict[str, float] = {}
     for tid, fr in fields.items():
         if fr.fit is not None and fr.fit.rises and fr.fit.displacement_mm is not None:
-            within = fr.fit.displacement_mm <= SIM_TRAVEL_MM
-            o = detect_onset(fr.fit.displacement_mm[within], fr.fit.force_n[within])
+            o = _elbow(fr.fit.displacement_mm, fr.fit.force_n)
             if o is not None:
                 onsets[tid] = o.onset_mm
     return onsets

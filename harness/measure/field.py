@@ -118,6 +118,17 @@ def _hinge_onset(x: np.ndarray, y: np.ndarray) -> tuple[int, float]:
     return best[1], best[2]
 
 
+def contact_samples(f_gf: np.ndarray, i0: int) -> np.ndarray:
+    """Mask of a record's contact samples: from index ``i0`` up to the rig's stop (the first
+    reading at or beyond :data:`FORCE_LIMIT_GF`, which the load cell and stop make unreliable)."""
+    f = np.asarray(f_gf, float)
+    keep = np.arange(len(f)) >= i0
+    over = f >= FORCE_LIMIT_GF
+    if over.any():
+        keep &= np.arange(len(f)) < int(np.argmax(over))
+    return keep
+
+
 def extract_field_stiffness(trial: RigTrial, window_mm: float | None = None, n_boot: int = 1000,
                             seed: int = 0, max_travel_mm: float | None = None) -> FieldFit:
     """Field stiffness (N/mm) of one trial; see the module docstring for the steps.
@@ -146,10 +157,8 @@ def extract_field_stiffness(trial: RigTrial, window_mm: float | None = None, n_b
         level = float(f[0])
         i0 = 0
     tare = level
-    keep = np.arange(len(f)) >= i0
-    over = f >= FORCE_LIMIT_GF
-    if over.any():
-        keep &= np.arange(len(f)) < int(np.argmax(over))
+    keep = contact_samples(f, i0)
+    if np.any(f >= FORCE_LIMIT_GF):
         flags.append("force limit reached")
     xs, fs = x[keep] - x[i0], (f[keep] - tare) * GF_TO_N
     drops = np.diff(f[keep]) < -30.0

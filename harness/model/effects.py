@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import re
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from importlib import metadata
 from typing import Any, ClassVar, Mapping
@@ -228,12 +229,14 @@ class Obstruction(Effect):
     scopes = ("per_trial",)
 
     def fit_window_mm(self) -> float | None:
-        v = self.p["onset_mm"]
-        return v if math.isfinite(v) else None
+        return self._set("onset_mm")
 
     def record_end_mm(self) -> float | None:
-        v = self.p["record_end_mm"]
-        return v if math.isfinite(v) else None
+        return self._set("record_end_mm")
+
+    def _set(self, name: str) -> float | None:
+        v = self.p[name]
+        return v if math.isfinite(v) else None  # the null (inf): not set for this trial
 
 
 for _cls in (ModulusScale, RootCompliance, RigCompliance, BaseFlare, ProbeMisalignment, Obstruction):
@@ -260,6 +263,12 @@ def load_entry_points() -> None:
             warnings.warn(f"entry point {ep.name!r} in {ENTRY_POINT_GROUP} is not an Effect subclass; skipped")
             continue
         register_effect(cls, ("plugin",))
+
+
+def _least(values: Iterable[float | None]) -> float | None:
+    """The smallest of the values that are set (None if none is): the strictest of several effects."""
+    w = [v for v in values if v is not None]
+    return min(w) if w else None
 
 
 # --------------------------------------------------------------- specs in a configuration
@@ -424,12 +433,10 @@ class AppliedEffects:
         return x_m, f_n
 
     def fit_window_mm(self) -> float | None:
-        w = [v for v in (e.fit_window_mm() for e in self.effects) if v is not None]
-        return min(w) if w else None
+        return _least(e.fit_window_mm() for e in self.effects)
 
     def record_end_mm(self) -> float | None:
-        w = [v for v in (e.record_end_mm() for e in self.effects) if v is not None]
-        return min(w) if w else None
+        return _least(e.record_end_mm() for e in self.effects)
 
     @property
     def changes_diameter(self) -> bool:
