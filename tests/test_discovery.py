@@ -493,6 +493,7 @@ def hidden_root(tmp_path_factory):
     return generate_hidden(d, 11, {"root_compliance": {"k_root": 15.0}}, n_bushes=6)
 
 
+@pytest.mark.heavy
 def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root, tmp_path):
     from canebench.data.dataset import load_dataset
     from canebench.discovery.workflow import discover
@@ -578,6 +579,7 @@ def test_an_interval_reaching_no_effect_covers_the_null():
     assert math.isnan(null_bound(Parameter("1", 0.0, 1.0, math.nan)))
 
 
+@pytest.mark.heavy
 def test_a_name_whose_interval_reaches_no_effect_is_withheld_and_the_rest_refitted(hidden_root, tmp_path,
                                                                                   monkeypatch):
     """The hidden root spring (15 N m/rad) passes the selection; its bootstrap interval is then
@@ -625,6 +627,7 @@ def test_a_name_whose_interval_reaches_no_effect_is_withheld_and_the_rest_refitt
     assert g["after_cv"]["median_abs_log_ratio"] == pytest.approx(g["before"]["median_abs_log_ratio"], rel=1e-6)
 
 
+@pytest.mark.heavy
 def test_discover_names_nothing_on_a_null_dataset(tmp_path):
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
@@ -653,16 +656,16 @@ def test_discovery_settings_are_checked_whatever_numeric_type_carries_them():
             _check_settings(*bad)
 
 
-def test_a_mistyped_engine_stops_discovery_before_any_work_and_a_missing_one_is_skipped(tmp_path):
+def test_a_mistyped_engine_stops_discovery_before_any_work(tmp_path):
     """An unknown name raises before the output folder exists (it used to surface from the
-    provenance block after minutes of fitting, and an engine that is not installed crashed
-    there too); an engine that is not installed is skipped, and the result says why."""
+    provenance block after minutes of fitting); an engine that is not installed is refused by
+    the engine lookup discovery uses, which the next test's run turns into a skip."""
     from canebench.backends.base import DynamicBackend
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
+    from canebench.discovery import workflow
     from canebench.discovery.workflow import discover
     from canebench.errors import BackendUnavailable, UnknownBackend
-    from canebench.execute.executors import make_executor
     from canebench.registry import register_backend, unregister_backend
 
     trials = load_dataset(generate_hidden(tmp_path / "null", 12, {}, n_bushes=2))
@@ -683,9 +686,36 @@ def test_a_mistyped_engine_stops_discovery_before_any_work_and_a_missing_one_is_
     register_backend(NotInstalled)
     try:
         with pytest.raises(BackendUnavailable, match="discover_not_installed"):
-            from canebench.discovery import workflow
-
             workflow._engines("test", "discover_not_installed", None)
+    finally:
+        unregister_backend("discover_not_installed")
+
+
+@pytest.mark.heavy
+def test_a_missing_engine_is_skipped_and_the_result_says_why(tmp_path):
+    """An engine that is not installed is skipped (it crashed discovery's provenance block
+    once); the result says why, and its gap and provenance hold only the engines that ran."""
+    from canebench.backends.base import DynamicBackend
+    from canebench.canes.generate_hidden import generate_hidden
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.execute.executors import make_executor
+    from canebench.registry import register_backend, unregister_backend
+
+    trials = load_dataset(generate_hidden(tmp_path / "null", 12, {}, n_bushes=2))
+    out = tmp_path / "out"
+
+    class NotInstalled(DynamicBackend):
+        name, engine_module = "discover_not_installed", "no_such_engine_module_here"
+
+        def settings(self, proto):
+            return {}
+
+        def build(self, chain, proto):
+            raise AssertionError("an unavailable engine is never built")
+
+    register_backend(NotInstalled)
+    try:
         res = discover(trials, backends=["beam", "discover_not_installed"], out=out,
                        executor=make_executor("serial", 1, None), n_boot=5)
     finally:
@@ -697,6 +727,7 @@ def test_a_mistyped_engine_stops_discovery_before_any_work_and_a_missing_one_is_
     assert doc["provenance"]["engines"].keys() == {"beam"}
 
 
+@pytest.mark.heavy
 def test_of_the_effects_that_pass_the_one_with_the_lowest_bic_is_named(tmp_path, monkeypatch):
     """A probe pitched 30 degrees on canes whose moduli scatter 0.3 in ln (twice the self-test's;
     the real canes scatter more): a modulus scale and the pitch both pass the first step, and
@@ -732,6 +763,7 @@ def test_of_the_effects_that_pass_the_one_with_the_lowest_bic_is_named(tmp_path,
     assert sh["p"] > 0.05 and sh["beta"] > 0.5 and sh["predicted_mean"] > 0.05, sh
 
 
+@pytest.mark.heavy
 def test_a_material_effect_is_not_named_where_one_too_small_to_name_fits_better(tmp_path):
     """A probe pitched 15 degrees (seed 9602, the weak-pitch study's set: median |d ln k| 0.044,
     under twice the noise): the pitch passes significance with the lowest BIC but moves the model
@@ -769,6 +801,7 @@ def test_a_material_effect_is_not_named_where_one_too_small_to_name_fits_better(
     assert res.unexplained and any("too small to name" in n for n in res.notes), res.notes
 
 
+@pytest.mark.heavy
 def test_a_pair_displaces_a_single_that_mimics_its_sum(tmp_path):
     """A soft root (41 N m/rad) with a stiffer material (scale 1.72), the strengths an independent
     generator hid in its ds10: the two cancel in the mean (the scale alone does not lean the
@@ -857,6 +890,7 @@ def test_level_trend_holds_its_level_and_sees_stiffening_that_goes_as_compliance
     assert np.sum(ps < 0.01) >= 35, np.sort(ps)
 
 
+@pytest.mark.heavy
 def test_discover_withholds_names_for_a_lateral_support_outside_the_library(tmp_path):
     """A neighbouring cane as a lateral spring below the push points (not in the library): the
     library fits what it can (here a modulus scale), but the residual still falls with the
@@ -894,6 +928,7 @@ def test_discover_withholds_names_for_a_lateral_support_outside_the_library(tmp_
     assert "partial: not named" in (out / "report.html").read_text()
 
 
+@pytest.mark.heavy
 def test_direction_test_holds_its_level_on_nulls_and_sees_a_global_shift():
     """The selection's score test on the bundled geometry with simulated residuals: canes
     carry their own offsets (tau 0.3 in ln, the real data's scale) and trials their noise;
@@ -1232,6 +1267,7 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
     assert nearest["net"] > 2 * MIN_CHANGE, nearest
 
 
+@pytest.mark.heavy
 def test_effects_whose_interval_reaches_no_effect_leave_one_at_a_time_with_their_pair_partner():
     """``drop_unsupported`` on the bundled geometry (seed 7's scale 1.69 and root 131 N m/rad
     hidden, as in the backward-pass test), intervals and engine re-anchoring replaced by stand-ins
@@ -1532,6 +1568,7 @@ def test_adequacy_holds_its_level_where_level_and_residual_share_the_geometry_er
     assert got["n_trials_left_out"] == 1 and got["p"] == ref["p"] and np.isfinite(got["null_median"])
 
 
+@pytest.mark.heavy
 def test_the_selection_score_test_holds_its_level_where_the_residual_carries_the_caliper_line_error(bundled_trials):
     """Nulls on the bundled geometry whose residual carries each cane's caliper-line error at
     the real calipers' scatter (0.9 mm; 1.06 pooled on the field data): r = -g + cane offsets
@@ -1673,6 +1710,7 @@ def _power_law_diameters(bundled_trials, cfg, ss, inv, rng, low=0.4, high=2.2):
         d0[q] = a + b * x(ss.s[q])
     return d0
 
+@pytest.mark.heavy
 def test_a_trend_along_the_canes_withholds_names_only_when_no_library_effect_takes_it(bundled_trials):
     """The within-cane check's null carries the caliper line's random error, not the taper's
     curvature below the calipers. An independent generator's power-law tapers (exponents drawn

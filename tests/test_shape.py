@@ -109,6 +109,7 @@ def test_the_shape_level_holds_its_level_at_the_allowance_and_sees_traces_that_a
     assert shape_level(canes, sh, alpha=0.002)["mean"] == pytest.approx(np.mean(by_cane), rel=1e-12)
 
 
+@pytest.mark.heavy
 def test_a_pitched_probe_bends_the_engines_traces_and_the_check_sees_it_missing():
     """The beam pushed with the probe pitched up stiffens over the push (the pull along the cane
     and the force turning against the cane as it tilts), pitched down it softens; level, the
@@ -206,6 +207,7 @@ def test_trace_shapes_reads_only_the_trials_asked_for():
     assert np.isfinite(sh.kappa_field[0]) and np.isnan(sh.kappa_field[1])
 
 
+@pytest.mark.heavy
 def test_discover_withholds_a_pitch_the_traces_do_not_show(tmp_path, monkeypatch):
     """A neighbouring cane's lateral spring support (outside the library; a linear spring, so
     linear traces) screened against the probe's pitch alone: the pitch fits much of the
