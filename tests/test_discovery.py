@@ -656,23 +656,11 @@ def test_discovery_settings_are_checked_whatever_numeric_type_carries_them():
             _check_settings(*bad)
 
 
-def test_a_mistyped_engine_stops_discovery_before_any_work(tmp_path):
-    """An unknown name raises before the output folder exists (it used to surface from the
-    provenance block after minutes of fitting); an engine that is not installed is refused by
-    the engine lookup discovery uses, which the next test's run turns into a skip."""
+@pytest.fixture
+def not_installed_engine():
+    """A backend registered under ``discover_not_installed`` whose engine module does not exist."""
     from canebench.backends.base import DynamicBackend
-    from canebench.canes.generate_hidden import generate_hidden
-    from canebench.data.dataset import load_dataset
-    from canebench.discovery import workflow
-    from canebench.discovery.workflow import discover
-    from canebench.errors import BackendUnavailable, UnknownBackend
     from canebench.registry import register_backend, unregister_backend
-
-    trials = load_dataset(generate_hidden(tmp_path / "null", 12, {}, n_bushes=2))
-    out = tmp_path / "out"
-    with pytest.raises(UnknownBackend, match="nosuch"):
-        discover(trials, backends=["beam", "nosuch"], out=out)
-    assert not out.exists()
 
     class NotInstalled(DynamicBackend):
         name, engine_module = "discover_not_installed", "no_such_engine_module_here"
@@ -685,42 +673,43 @@ def test_a_mistyped_engine_stops_discovery_before_any_work(tmp_path):
 
     register_backend(NotInstalled)
     try:
-        with pytest.raises(BackendUnavailable, match="discover_not_installed"):
-            workflow._engines("test", "discover_not_installed", None)
+        yield NotInstalled.name
     finally:
-        unregister_backend("discover_not_installed")
+        unregister_backend(NotInstalled.name)
+
+
+def test_a_mistyped_engine_stops_discovery_before_any_work(tmp_path, bundled_trials, not_installed_engine):
+    """An unknown name raises before the output folder exists (it used to surface from the
+    provenance block after minutes of fitting). The engine lookup skips an engine that is not
+    installed, with its reason (the next test's run reports it), and refuses only a missing
+    baseline engine, without which nothing can be scored."""
+    from canebench.discovery import workflow
+    from canebench.errors import BackendUnavailable, UnknownBackend
+
+    out = tmp_path / "out"
+    with pytest.raises(UnknownBackend, match="nosuch"):
+        workflow.discover(bundled_trials, backends=["beam", "nosuch"], out=out)
+    assert not out.exists()
+    usable, skipped = workflow._engines("beam", "beam", ["beam", not_installed_engine])
+    assert usable == ["beam"] and "no_such_engine_module_here" in skipped[not_installed_engine], (usable, skipped)
+    with pytest.raises(BackendUnavailable, match=not_installed_engine):
+        workflow._engines("test", not_installed_engine, None)
 
 
 @pytest.mark.heavy
-def test_a_missing_engine_is_skipped_and_the_result_says_why(tmp_path):
+def test_a_missing_engine_is_skipped_and_the_result_says_why(tmp_path, not_installed_engine):
     """An engine that is not installed is skipped (it crashed discovery's provenance block
     once); the result says why, and its gap and provenance hold only the engines that ran."""
-    from canebench.backends.base import DynamicBackend
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
     from canebench.discovery.workflow import discover
     from canebench.execute.executors import make_executor
-    from canebench.registry import register_backend, unregister_backend
 
     trials = load_dataset(generate_hidden(tmp_path / "null", 12, {}, n_bushes=2))
     out = tmp_path / "out"
-
-    class NotInstalled(DynamicBackend):
-        name, engine_module = "discover_not_installed", "no_such_engine_module_here"
-
-        def settings(self, proto):
-            return {}
-
-        def build(self, chain, proto):
-            raise AssertionError("an unavailable engine is never built")
-
-    register_backend(NotInstalled)
-    try:
-        res = discover(trials, backends=["beam", "discover_not_installed"], out=out,
-                       executor=make_executor("serial", 1, None), n_boot=5)
-    finally:
-        unregister_backend("discover_not_installed")
-    assert any(n.startswith("backend discover_not_installed skipped: ") and "no_such_engine_module_here" in n
+    res = discover(trials, backends=["beam", not_installed_engine], out=out,
+                   executor=make_executor("serial", 1, None), n_boot=5)
+    assert any(n.startswith(f"backend {not_installed_engine} skipped: ") and "no_such_engine_module_here" in n
                for n in res.notes), res.notes
     assert set(res.gap["per_backend"]) == {"beam"}
     doc = json.loads((out / "discovery.json").read_text())
