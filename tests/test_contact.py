@@ -229,3 +229,36 @@ def test_imu_validation_names_file_and_field(tmp_path):
     p.write_text(cols + "\n" + "\n".join(bad))
     with pytest.raises(InputError, match=r"t\.imu\.csv.*'time_s'.*row 13: time does not increase"):
         read_imu_csv(p)
+
+
+@pytest.mark.parametrize("step", [1, 3, 20])
+def test_prefix_cost_equals_ruptures_rbf_cost(step):
+    """The constant-time rbf cost is ruptures' own CostRbf (an independent implementation) on every
+    segment, on and off its block grid, and binary segmentation finds the same change points with
+    either. Tolerance: a block sum is a difference of prefix sums as large as n^2, so it carries a
+    rounding of a few n^2 eps; the cost divides it by the segment's length."""
+    import ruptures as rpt
+    from ruptures.exceptions import NotEnoughPoints
+
+    from canebench.measure.kernel_cost import CostRbfPrefix
+
+    rng = np.random.default_rng(step)
+    for n, d in ((2, 1), (41, 2), (300, 1)):
+        x = rng.normal(size=(n, d))
+        ref, fast = rpt.costs.CostRbf().fit(x), CostRbfPrefix(step=step).fit(x)
+        assert fast.gamma == pytest.approx(ref.gamma, rel=1e-12)
+        for s in range(n):
+            for e in range(s + 1, n + 1, max(1, n // 17)):
+                tol = 8 * np.finfo(float).eps * n * n / (e - s)
+                assert abs(fast.error(s, e) - ref.error(s, e)) <= tol
+        with pytest.raises(NotEnoughPoints):
+            fast.error(5, 5)
+    # a mean shift and a variance change in one channel, as the IMU rule sees them
+    x = np.r_[rng.normal(0, 1, 400), rng.normal(2, 1, 300), rng.normal(2, 4, 300)]
+    pen = 22.5 * np.log(len(x)) / 10
+    jump = max(step, 5)
+    a = rpt.Binseg(model="rbf", min_size=jump, jump=jump).fit(x).predict(pen=pen)
+    b = rpt.Binseg(custom_cost=CostRbfPrefix(step=step), min_size=jump, jump=jump).fit(x).predict(pen=pen)
+    assert a == b and len(a) >= 3
+    with pytest.raises(ValueError, match="step"):
+        CostRbfPrefix(step=0)

@@ -142,14 +142,23 @@ def test_the_level_row_takes_only_the_callers_level():
         structure_tests(df, "r", seed=0, n_perm=100, level_col="lk")
 
 
-def _rough_trace(rng: np.random.Generator, rough: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A slightly stiffening push (0.5 mm steps) times (1 + e), e an AR(1) roughness of 0.85."""
-    n = int(rng.integers(20, 89))
+def rough_trace(rng: np.random.Generator, rough: float, phi: float = 0.85, n: int | None = None,
+                k: float | None = None, bend: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A slightly stiffening push (0.5 mm steps) times (1 + e), e an AR(1) roughness ``rough``
+    with lag-1 correlation ``phi``, plus a 0.5 gf white load-cell noise: (x mm, clean N, measured N).
+
+    ``n`` samples (default 20-88), slope ``k`` N/mm (default lognormal about 0.22) and the
+    stiffening ``bend`` over the push (default 0.15 +- 0.1) are drawn when not given. Also used by
+    ``tests/scripts/curvature_shared_noise.py``.
+    """
+    n = int(rng.integers(20, 89)) if n is None else n
+    k = float(np.exp(rng.normal(-1.5, 0.5))) if k is None else k
+    bend = float(rng.normal(0.15, 0.1)) if bend is None else bend
     x = np.arange(n) * 0.5
     e = np.zeros(n)
     for j in range(1, n):
-        e[j] = 0.85 * e[j - 1] + rng.normal(0.0, rough * np.sqrt(1.0 - 0.85**2))
-    clean = np.exp(rng.normal(-1.5, 0.5)) * x * (1.0 + rng.normal(0.15, 0.1) * x / x[-1])
+        e[j] = phi * e[j - 1] + rng.normal(0.0, rough * np.sqrt(1.0 - phi**2))
+    clean = k * x * (1.0 + bend * x / x[-1])
     return x, clean, clean * (1.0 + e) + rng.normal(0.0, 0.005, n)
 
 
@@ -173,7 +182,7 @@ def test_the_curvature_row_is_reported_but_never_flags_the_model():
         lvl = rng.normal(0.0, 0.3, N_CANES)
         res, curv = [], []
         for k in range(len(df)):
-            x, clean, f = _rough_trace(rng, 0.03)
+            x, clean, f = rough_trace(rng, 0.03)
             res.append(lvl[k // 3] + np.log(fit_line(x, f).slope / fit_line(x, clean).slope))
             curv.append(halves_slope_ratio(x, f))
         df["r"], df["curvature"] = res, curv

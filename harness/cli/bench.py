@@ -9,7 +9,7 @@ from . import common
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    be = sub.add_parser("bench", help="benchmarks: protocols, beam sweep, engines' CPU time, job runner overhead, Morris per engine")
+    be = sub.add_parser("bench", help="benchmarks: protocols, beam sweep, engines' CPU time, job runner overhead, Morris per engine, discovery, IMU change points")
     be.add_argument("--trials", help="trial globs on the bundled dataset")
     be.add_argument("--beam", action="store_true", help="time the beam backend's full 90-step sweep instead")
     be.add_argument("--engines", action="store_true",
@@ -28,7 +28,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     be.add_argument("--discover", action="store_true",
                     help="the whole discovery workflow with engine confirmation (--backends, default "
                          "beam,pinocchio,mujoco), by stage, as a ratio to a plain beam run of the same trials")
-    be.add_argument("--field", help="--morris, --discover: dataset (default: the bundled synthetic set)")
+    be.add_argument("--contact", action="store_true",
+                    help="the IMU rule's change points: ruptures' rbf cost against canebench's prefix-sum cost "
+                         "(--field: a folder of *.imu.csv logs, default the bundled synthetic contact set)")
+    be.add_argument("--field", help="--morris, --discover, --contact: dataset (default: the bundled synthetic set)")
     be.add_argument("--n-trials", type=int, default=2,
                     help="--morris: usable trials in the subset, spread over the dataset (default 2; --trials "
                          "overrides)")
@@ -61,6 +64,9 @@ def main(a: argparse.Namespace) -> int:
         return 0
     if a.discover:
         bench.bench_discover(data=a.field, backends=names, workers=a.workers)
+        return 0
+    if a.contact:
+        bench.bench_contact(data=a.field)
         return 0
     if a.beam:
         bench.bench_beam(trials=a.trials or "b1c1t1,b3c1t2,b5c3t1,b6c2t3")

@@ -429,3 +429,43 @@ def bench_discover(data: str | None = None, backends: list[str] | None = None, w
           f"target: under 180 s: {'met' if t_all < 180 else 'NOT met'}")
     print(f"  named: {', '.join(n['effect'] for n in res.named) or 'nothing'}; unexplained: {res.unexplained}")
     return {"wall_s": t_all, "plain_beam_s": t_plain, **res.timing}
+
+
+def bench_contact(data: str | None = None, jump: int = 20) -> pd.DataFrame:
+    """The IMU rule's change points with ``ruptures``' own rbf cost and with
+    :class:`~canebench.measure.kernel_cost.CostRbfPrefix`, on every channel of every
+    ``*.imu.csv`` in ``data`` (default: the bundled synthetic contact set), in this process.
+
+    Prints both costs' seconds, their ratio, and how many channels' change points
+    differ (the prefix cost is only a faster sum: any difference is a bug).
+    """
+    import time
+
+    import ruptures as rpt
+
+    from ..data.imu import read_imu_csv
+    from ..measure.contact import PEN_FACTOR, _changepoints, imu_residuals
+
+    d = Path(data) if data else Path(__file__).resolve().parents[1].parent / "canes" / "synthetic-contact"
+    files = sorted((d / "trials").glob("*.imu.csv")) or sorted(d.glob("*.imu.csv"))
+    if not files:
+        raise FileNotFoundError(f"{d}: no *.imu.csv files (IMU logs beside the rig CSVs)")
+    rows = []
+    for f in files:
+        resid = imu_residuals(read_imu_csv(f))
+        for k in range(resid.shape[1]):
+            x = resid[:, k]
+            t0 = time.perf_counter()
+            a = _changepoints(x, PEN_FACTOR, jump, cost=rpt.costs.CostRbf())
+            t1 = time.perf_counter()
+            b = _changepoints(x, PEN_FACTOR, jump)
+            t2 = time.perf_counter()
+            rows.append({"file": f.name, "channel": k, "n": len(x), "ruptures_s": t1 - t0, "prefix_s": t2 - t1,
+                         "same": a == b})
+    df = pd.DataFrame(rows)
+    ta, tb = df.ruptures_s.sum(), df.prefix_s.sum()
+    print(f"IMU change points, {len(files)} logs x 9 channels ({df.n.median():.0f} samples median), jump {jump}, "
+          f"one process:")
+    print(f"  ruptures' CostRbf {ta:.1f} s, CostRbfPrefix {tb:.1f} s: {ta / tb:.1f}x faster; "
+          f"channels with different change points: {int((~df.same).sum())} of {len(df)}")
+    return df

@@ -17,6 +17,7 @@ Run: ``python tests/scripts/curvature_shared_noise.py [N_DATASETS]`` (default 10
 a minute).
 """
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -24,14 +25,8 @@ import pandas as pd
 from canebench.discovery.structure import structure_tests
 from canebench.measure.fit import fit_line, halves_slope_ratio
 
-
-def trace(rng: np.random.Generator, n: int, k: float, bend: float, rough: float, phi: float):
-    x = np.arange(n) * 0.5
-    e = np.zeros(n)
-    for j in range(1, n):
-        e[j] = phi * e[j - 1] + rng.normal(0.0, rough * np.sqrt(1.0 - phi**2))
-    clean = k * x * (1.0 + bend * x / x[-1])
-    return x, clean, clean * (1.0 + e) + rng.normal(0.0, 0.005, n)  # 0.5 gf white
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests folder: the rough-trace simulator
+from test_structure import rough_trace  # noqa: E402
 
 
 def dataset(rng: np.random.Generator, rough: float, phi: float) -> pd.DataFrame:
@@ -39,8 +34,7 @@ def dataset(rng: np.random.Generator, rough: float, phi: float) -> pd.DataFrame:
     for c in range(18):
         level = rng.normal(0.0, 0.3)
         for _ in range(3):
-            x, clean, f = trace(rng, int(rng.integers(20, 89)), np.exp(rng.normal(-1.5, 0.5)),
-                                rng.normal(0.15, 0.1), rough, phi)
+            x, clean, f = rough_trace(rng, rough, phi)
             noise = np.log(fit_line(x, f).slope) - np.log(fit_line(x, clean).slope)
             rows.append({"cane": f"c{c}", "r": level + noise, "curvature": halves_slope_ratio(x, f)})
     return pd.DataFrame(rows)
@@ -58,7 +52,7 @@ def main() -> None:
         ps = np.array(ps)
         lk, cv = [], []
         for _ in range(400):
-            x, clean, f = trace(rng, 60, 0.2, 0.15, rough, phi)
+            x, clean, f = rough_trace(rng, rough, phi, n=60, k=0.2, bend=0.15)
             lk.append(np.log(fit_line(x, f).slope))
             cv.append(halves_slope_ratio(x, f))
         print(f"roughness {rough:.2f} (AR(1) {phi:.2f}): one trace's noise in ln k vs in curvature r = "
