@@ -1058,6 +1058,25 @@ def test_the_selftest_says_where_the_out_of_library_support_touches(tmp_path):
     assert (s["out_of_library_misnamed"], s["out_of_library_flagged_unexplained"]) == (1, 1)
 
 
+def test_the_selftest_counts_names_won_by_a_close_call_and_the_wrong_ones_among_them():
+    """Rows whose name carried a close rival (``close_rivals``), right or wrong, are counted; rows
+    written before the column existed count as none."""
+    from canebench.discovery.selftest import summarize
+
+    rows = pd.DataFrame([
+        {"kind": "single", "hidden": "probe_misalignment", "named": "modulus_scale", "correct": False,
+         "close_rivals": "modulus_scale>probe_misalignment", "false_names": "modulus_scale"},
+        {"kind": "single", "hidden": "modulus_scale", "named": "modulus_scale", "correct": True,
+         "close_rivals": "modulus_scale>probe_misalignment", "false_names": None},
+        {"kind": "single", "hidden": "root_compliance", "named": "root_compliance", "correct": True,
+         "close_rivals": None, "false_names": None},
+    ]).assign(unexplained=False, partial="", size=1.0, gap_before=1.0, gap_after_cv=0.5)
+    s = summarize(rows)
+    assert (s["names_with_close_rival"], s["wrong_names_with_close_rival"]) == (2, 1)
+    s = summarize(rows.drop(columns=["close_rivals"]))
+    assert (s["names_with_close_rival"], s["wrong_names_with_close_rival"]) == (0, 0)
+
+
 def test_the_selftest_reports_each_done_when_criterion_against_the_issues_targets():
     """The issue's "done when" thresholds (90 % correct on large effects, all four parameters
     within 20 % there, at most 1 false name on the nulls, both pair members named, every
@@ -1254,6 +1273,49 @@ def test_the_backward_pass_drops_a_stale_effect_and_keeps_material_and_new_ones(
     assert current == names and steps == [] and calls == []
     nearest = stalest(names, ("modulus_scale", "rig_compliance"), cv0, at, lkf)
     assert nearest["net"] > 2 * MIN_CHANGE, nearest
+
+
+def test_a_name_won_by_less_than_close_bic_carries_its_rival():
+    """Forward selection on the bundled geometry (one effect allowed, the engine re-anchoring an
+    identity): the field is a 35 degree pitch's pattern blended with its mean level (weights w and
+    1 - w) plus seeded scatter. At w = 0.35 the level is as much of the story as the pattern: a
+    modulus scale and the pitch both pass every rule, their BICs under CLOSE_BIC apart; the lower
+    is named and the other is reported beside it, with the BIC gap the step's rows show, on the
+    named effect and in one note. At w = 0.45 the pitch wins clearly and nothing is reported."""
+    import pandas as pd
+
+    from canebench.discovery.screenset import Anchored
+    from canebench.discovery.selection import CLOSE_BIC, forward_select
+    from canebench.discovery.workflow import mark_close_calls
+    from canebench.model.effects import EffectSpec
+
+    ss, lkb, scatter, _ = _seed7_pair_screen()
+    at = Anchored(ss, lkb)
+    pitch = at.predict((EffectSpec.parse("probe_misalignment(angle_deg=35)"),)) - lkb
+    pair = ("modulus_scale", "probe_misalignment")
+
+    def select(w):
+        lkf = lkb + w * pitch + (1 - w) * np.mean(pitch) + scatter
+        sel = forward_select(pair, at, lkf, lambda a, c: (a, c), max_effects=1)
+        return sel, pd.DataFrame(sel.steps).set_index("candidate")
+
+    sel, rows = select(0.35)
+    assert rows.passed.all(), rows
+    won, lost = rows.bic.idxmin(), rows.bic.idxmax()
+    gap = rows.bic[lost] - rows.bic[won]
+    assert 0 < gap < CLOSE_BIC and sel.current == (won,)
+    assert sel.close_calls == [{"step": 1, "chosen": (won,), "rivals": [(lost, pytest.approx(gap))]}]
+    assert lost in rows.close_rivals[won]
+    named = [{"effect": won}, {"effect": "obstruction"}]
+    notes = mark_close_calls(named, sel.close_calls)
+    assert named[0]["close_rivals"] == [{"candidate": lost, "bic_above": pytest.approx(gap)}]
+    assert "close_rivals" not in named[1] and len(notes) == 1 and lost in notes[0]
+    # a step whose choice was dropped later leaves nothing to report
+    assert mark_close_calls([{"effect": "obstruction"}], sel.close_calls) == []
+
+    sel, rows = select(0.45)
+    assert sel.current == ("probe_misalignment",) and sel.close_calls == []
+    assert rows.bic["modulus_scale"] - rows.bic["probe_misalignment"] > CLOSE_BIC
 
 
 @pytest.mark.heavy

@@ -88,7 +88,7 @@ def main(a: argparse.Namespace) -> int:
                   + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" + (" (early contact)" if v.get("excluded") else "")
                               for t, v in n["local"].items()))
         else:
-            print(f"  {what}: {n['effect']} {_params_text(n)}")
+            print(f"  {what}: {n['effect']} {_params_text(n)}{_rivals_text(n)}")
     for u in doc.get("unsupported", []):
         print(f"  not named: {u['effect']} {_params_text(u)}"
               + (f" (its interval reaches no effect: {', '.join(u['covers_null'])})" if u["covers_null"] else "")
@@ -119,6 +119,12 @@ def main(a: argparse.Namespace) -> int:
     print(f"  unexplained ({UNEXPLAINED_WHY}): {doc['unexplained']}")
     print(f"  {doc['timing_s']['total_s']:.1f} s; written: {Path(a.out) / 'discovery.json'}, {Path(a.out) / 'model.yaml'}")
     return 0
+
+
+def _rivals_text(n: dict) -> str:
+    """`` (barely ahead of X: BIC +0.71)`` for a name won by less than CLOSE_BIC, else ``""``."""
+    r = ", ".join(f"{c['candidate']}: BIC +{c['bic_above']:.2f}" for c in n.get("close_rivals") or [])
+    return f" (barely ahead of {r})" if r else ""
 
 
 def _params_text(n: dict) -> str:

@@ -189,6 +189,9 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     lv = (sh.get("level") or {}).get("mean")
     row["shape_level"] = lv if lv is not None else math.nan
     row["false_names"] = "+".join(sorted(set(named) - hidden)) or ""
+    # names won by less than CLOSE_BIC, with the rival beside each (effect>rival)
+    row["close_rivals"] = "+".join(f"{e}>{c['candidate']}" for e, n in named.items()
+                                   for c in n.get("close_rivals", []))
     # effects named and then dropped: as stale by selection's backward pass, or their interval
     # reaching no effect
     row["dropped"] = "+".join(r["removed"] for r in doc["selection"] if r.get("removed")) or ""
@@ -314,6 +317,10 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         # cane to the data: what a flare or a root does), and how many of them were named
         "n_out_of_library_support_below_pushes": int(below.sum()),
         "out_of_library_misnamed_support_below_pushes": int((below & (df.named != "none")).sum()),
+        # names won by less than CLOSE_BIC (a rival reported beside them), and how many were wrong
+        "names_with_close_rival": int((_col(df, "close_rivals", "") != "").sum()),
+        "wrong_names_with_close_rival": int(((_col(df, "close_rivals", "") != "")
+                                             & (_col(df, "false_names", "") != "")).sum()),
     }
     for p in ("scale", "k_root", "k_rig", "angle_deg"):
         c = f"err_{p}"

@@ -108,7 +108,7 @@ from .nulls import ci_of
 from .onsets import EarlyContact, Onset, detect_early_contact, detect_onset, ramp_is_the_cane
 from .screen import trial_geometry
 from .screenset import Anchored, ScreenSet
-from .selection import ALPHA, MIN_CHANGE, drop_unsupported, forward_select
+from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, drop_unsupported, forward_select
 from .structure import between_share
 from .verdict import INADEQUATE, judge
 
@@ -455,6 +455,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             # what the calipers would have read differently (mm), against their own scatter
             named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(at.screen.caliper_change(fx1)))),
                                            "caliper_scatter": 1e3 * at.screen.cal_sigma}
+    notes.extend(mark_close_calls(named, sel.close_calls))
     if obstruction or early:
         local = {k: ({"onset_mm": v, "excluded": True, "reason": unscored[k]} if k in unscored else {"onset_mm": v})
                  for k, v in onsets.items()}
@@ -533,6 +534,27 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     if outp is not None:
         write_outputs(result, outp, preset, ci)
     return result
+
+
+def mark_close_calls(named: list[dict], close_calls: list[dict]) -> list[str]:
+    """Give each named effect that won its step by less than :data:`.selection.CLOSE_BIC` its
+    ``close_rivals`` (``candidate``, ``bic_above``), in place; returns one note per such step.
+
+    ``close_calls`` is :attr:`.selection.Selection.close_calls`; a step whose chosen effects were
+    all dropped later (backward pass, intervals) is not reported: nothing named rests on it.
+    """
+    notes = []
+    for cc in close_calls:
+        kept = [n for n in named if n["effect"] in cc["chosen"]]
+        if not kept:
+            continue
+        for n in kept:
+            n["close_rivals"] = [{"candidate": c, "bic_above": float(d)} for c, d in cc["rivals"]]
+        notes.append(f"{'+'.join(cc['chosen'])} was chosen at step {cc['step']} by the lowest BIC, but "
+                     + ", ".join(f"{c} passed every rule too, only {d:.2g} above" for c, d in cc["rivals"])
+                     + f" (under {CLOSE_BIC:g}: a Bayes factor under e, which the data barely support); read the "
+                       "name with that rival beside it")
+    return notes
 
 
 def unscored_onsets(onsets: dict[str, float], fields: dict) -> dict[str, str]:
