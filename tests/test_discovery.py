@@ -1070,9 +1070,16 @@ def test_the_selftest_counts_names_won_by_a_close_call_and_the_wrong_ones_among_
          "close_rivals": "modulus_scale>probe_misalignment", "false_names": None},
         {"kind": "single", "hidden": "root_compliance", "named": "root_compliance", "correct": True,
          "close_rivals": None, "false_names": None},
+        # two names with a close rival (one a pair), only the second false; and a false name that
+        # won clearly beside a close call that was right
+        {"kind": "pair", "hidden": "rig_compliance+root_compliance", "named": "root_compliance+base_flare",
+         "correct": False, "close_rivals": "root_compliance>rig_compliance+modulus_scale; base_flare>rig_compliance",
+         "false_names": "base_flare"},
+        {"kind": "pair", "hidden": "rig_compliance+root_compliance", "named": "rig_compliance+base_flare",
+         "correct": False, "close_rivals": "rig_compliance>root_compliance", "false_names": "base_flare"},
     ]).assign(unexplained=False, partial="", size=1.0, gap_before=1.0, gap_after_cv=0.5)
     s = summarize(rows)
-    assert (s["names_with_close_rival"], s["wrong_names_with_close_rival"]) == (2, 1)
+    assert (s["names_with_close_rival"], s["wrong_names_with_close_rival"]) == (5, 2)
     s = summarize(rows.drop(columns=["close_rivals"]))
     assert (s["names_with_close_rival"], s["wrong_names_with_close_rival"]) == (0, 0)
 
@@ -1310,8 +1317,10 @@ def test_a_name_won_by_less_than_close_bic_carries_its_rival():
     notes = mark_close_calls(named, sel.close_calls)
     assert named[0]["close_rivals"] == [{"candidate": lost, "bic_above": pytest.approx(gap)}]
     assert "close_rivals" not in named[1] and len(notes) == 1 and lost in notes[0]
-    # a step whose choice was dropped later leaves nothing to report
+    # a step whose choice was dropped later leaves nothing to report, nor a rival named itself
     assert mark_close_calls([{"effect": "obstruction"}], sel.close_calls) == []
+    both = [{"effect": won}, {"effect": lost}]
+    assert mark_close_calls(both, sel.close_calls) == [] and all("close_rivals" not in n for n in both)
 
     sel, rows = select(0.45)
     assert sel.current == ("probe_misalignment",) and sel.close_calls == []

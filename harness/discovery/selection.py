@@ -213,6 +213,8 @@ def forward_select(candidates: tuple[str, ...], at: Anchored, lkf: np.ndarray,
                                                     steps, len(current))
             removed.extend(dropped)
             entered = _prune(entered, tuple(dropped))
+            # a close call that chose an effect now dropped no longer stands behind a name
+            close_calls[:] = [cc for cc in close_calls if not set(cc["chosen"]) & set(dropped)]
             continue
         red = best["gain"] / float(l1_cur.mean()) if l1_cur.mean() > 0 else 0.0
         stop = (f"no candidate passes (best by held-out gain: {'+'.join(best['add'])}, {best['gain']:.3g} in mean "

@@ -189,9 +189,10 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     lv = (sh.get("level") or {}).get("mean")
     row["shape_level"] = lv if lv is not None else math.nan
     row["false_names"] = "+".join(sorted(set(named) - hidden)) or ""
-    # names won by less than CLOSE_BIC, with the rival beside each (effect>rival)
-    row["close_rivals"] = "+".join(f"{e}>{c['candidate']}" for e, n in named.items()
-                                   for c in n.get("close_rivals", []))
+    # names won by less than CLOSE_BIC, with the rival beside each ("effect>rival; ...", a rival
+    # can be a pair "a+b")
+    row["close_rivals"] = "; ".join(f"{e}>{c['candidate']}" for e, n in named.items()
+                                    for c in n.get("close_rivals", []))
     # effects named and then dropped: as stale by selection's backward pass, or their interval
     # reaching no effect
     row["dropped"] = "+".join(r["removed"] for r in doc["selection"] if r.get("removed")) or ""
@@ -285,6 +286,17 @@ def _col(df: pd.DataFrame, col: str, empty: Any) -> pd.Series:
     return df[col].fillna(empty).astype(type(empty)) if col in df else pd.Series(empty, index=df.index)
 
 
+def _close_call_counts(df: pd.DataFrame) -> dict[str, int]:
+    """Names that carried a close rival (``close_rivals``: ``effect>rival`` items) and the false
+    ones among them (the effect in the row's ``false_names``)."""
+    won, wrong = set(), 0
+    for i, cr, fn in zip(df.index, _col(df, "close_rivals", ""), _col(df, "false_names", "")):
+        for e in {item.split(">")[0].strip() for item in cr.split(";") if ">" in item}:
+            won.add((i, e))
+            wrong += e in fn.split("+")
+    return {"names_with_close_rival": len(won), "wrong_names_with_close_rival": wrong}
+
+
 def summarize(df: pd.DataFrame) -> dict[str, Any]:
     big = df[(df.kind.isin(["single", "pair"])) & ((df["size"] > 2 * NOISE) | df.hidden.str.contains("obstruction"))]
     below = (df.kind == "out_of_library") & (_col(df, "support_below_pushes", 0.0) == 1.0)
@@ -318,9 +330,7 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "n_out_of_library_support_below_pushes": int(below.sum()),
         "out_of_library_misnamed_support_below_pushes": int((below & (df.named != "none")).sum()),
         # names won by less than CLOSE_BIC (a rival reported beside them), and how many were wrong
-        "names_with_close_rival": int((_col(df, "close_rivals", "") != "").sum()),
-        "wrong_names_with_close_rival": int(((_col(df, "close_rivals", "") != "")
-                                             & (_col(df, "false_names", "") != "")).sum()),
+        **_close_call_counts(df),
     }
     for p in ("scale", "k_root", "k_rig", "angle_deg"):
         c = f"err_{p}"

@@ -540,18 +540,21 @@ def mark_close_calls(named: list[dict], close_calls: list[dict]) -> list[str]:
     """Give each named effect that won its step by less than :data:`.selection.CLOSE_BIC` its
     ``close_rivals`` (``candidate``, ``bic_above``), in place; returns one note per such step.
 
-    ``close_calls`` is :attr:`.selection.Selection.close_calls`; a step whose chosen effects were
-    all dropped later (backward pass, intervals) is not reported: nothing named rests on it.
+    ``close_calls`` is :attr:`.selection.Selection.close_calls` (the selection forgets those of
+    effects its backward pass drops). A step whose chosen effects were all dropped later (the
+    intervals) is not reported: nothing named rests on it; nor is a rival that is named itself.
     """
     notes = []
+    names = {n["effect"] for n in named}
     for cc in close_calls:
         kept = [n for n in named if n["effect"] in cc["chosen"]]
-        if not kept:
+        rivals = [(c, d) for c, d in cc["rivals"] if not set(c.split("+")) <= names]
+        if not kept or not rivals:
             continue
         for n in kept:
-            n["close_rivals"] = [{"candidate": c, "bic_above": float(d)} for c, d in cc["rivals"]]
+            n["close_rivals"] = [{"candidate": c, "bic_above": float(d)} for c, d in rivals]
         notes.append(f"{'+'.join(cc['chosen'])} was chosen at step {cc['step']} by the lowest BIC, but "
-                     + ", ".join(f"{c} passed every rule too, only {d:.2g} above" for c, d in cc["rivals"])
+                     + ", ".join(f"{c} passed every rule too, only {d:.2f} above" for c, d in rivals)
                      + f" (under {CLOSE_BIC:g}: a Bayes factor under e, which the data barely support); read the "
                        "name with that rival beside it")
     return notes

@@ -2,8 +2,8 @@
 
 ``ruptures``' own ``CostRbf`` sums the Gram sub-matrix of every segment it is
 asked about, O(length^2) each; binary segmentation asks about every candidate
-split of every segment, so one 40 Hz IMU channel of a few minutes costs a
-quarter of a second. Here the Gram matrix is built once, with the same kernel
+split of every segment, so one 40 Hz IMU channel of 1,760 samples (44 s)
+costs about 0.2 s. Here the Gram matrix is built once, with the same kernel
 (squared distances scaled by the median heuristic, clipped to [1e-2, 1e2],
 exponentiated), and summed into a 2-D prefix table, so a segment's block sum is
 four look-ups. The cost is the same function of (start, end); the search,
@@ -33,6 +33,10 @@ class CostRbfPrefix(BaseCost):
         Segment ends on multiples of ``step`` (and the signal's end) are summed ahead, in blocks;
         any other end is summed from the Gram matrix directly (right, but not fast). Binary
         segmentation with ``jump=step`` only asks for the former. 1: every end.
+
+    Each :meth:`fit` starts afresh (a default ``gamma`` is the new signal's median heuristic),
+    unlike ``ruptures``' ``CostRbf``, which keeps its first signal's Gram matrix: still, pass one
+    instance per channel.
     """
 
     model = "rbf_prefix"
@@ -41,6 +45,7 @@ class CostRbfPrefix(BaseCost):
         if step < 1:
             raise ValueError(f"step must be >= 1, got {step}")
         self.min_size = 1
+        self._gamma_given = gamma
         self.gamma = gamma
         self.step = int(step)
 
@@ -51,6 +56,7 @@ class CostRbfPrefix(BaseCost):
         self.signal = x  # Binseg.predict reads the sample count from it
         n = len(x)
         d2 = pdist(x, metric="sqeuclidean")
+        self.gamma = self._gamma_given
         if self.gamma is None:
             med = float(np.median(d2)) if d2.size else 0.0
             self.gamma = 1.0 / med if med != 0 else 1.0

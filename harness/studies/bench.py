@@ -437,7 +437,8 @@ def bench_contact(data: str | None = None, jump: int = 20) -> pd.DataFrame:
     ``*.imu.csv`` in ``data`` (default: the bundled synthetic contact set), in this process.
 
     Prints both costs' seconds, their ratio, and how many channels' change points
-    differ (the prefix cost is only a faster sum: any difference is a bug).
+    differ (the prefix cost is only a faster sum: a difference means a bug, or a near-tie
+    between two candidate splits that rounding decided the other way).
     """
     import time
 
@@ -446,7 +447,9 @@ def bench_contact(data: str | None = None, jump: int = 20) -> pd.DataFrame:
     from ..data.imu import read_imu_csv
     from ..measure.contact import PEN_FACTOR, _changepoints, imu_residuals
 
-    d = Path(data) if data else Path(__file__).resolve().parents[1].parent / "canes" / "synthetic-contact"
+    from .. import canes
+
+    d = Path(data) if data else Path(canes.__file__).resolve().parent / "synthetic-contact"
     files = sorted((d / "trials").glob("*.imu.csv")) or sorted(d.glob("*.imu.csv"))
     if not files:
         raise FileNotFoundError(f"{d}: no *.imu.csv files (IMU logs beside the rig CSVs)")
