@@ -71,7 +71,7 @@ def figures(out: str | Path) -> list[Path]:
 
 def section(folder: str | Path) -> str:
     """HTML section for a folder holding ``discovery.json`` (empty string if none)."""
-    from canebench.discovery.checks_text import adequacy_lines
+    from canebench.discovery.checks_text import adequacy_lines, rivals_text
     from canebench.discovery.verdict import UNEXPLAINED_WHY
 
     folder = Path(folder)
@@ -89,9 +89,8 @@ def section(folder: str | Path) -> str:
             ps = f"{n.get('n_trials', len(n.get('local', {})))} trial(s): " + ", ".join(
                 f"{t} at {v['onset_mm']:.1f} mm" + (" (soft contact before it: left out)" if v.get("excluded") else "")
                 for t, v in n.get("local", {}).items())
-        label = html.escape(n["effect"]) + (" <i>(partial: not named)</i>" if n in partial else "") + "".join(
-            f" <i>(barely ahead of {html.escape(c['candidate'])}: BIC +{c['bic_above']:.2f})</i>"
-            for c in n.get("close_rivals", []))
+        label = html.escape(n["effect"]) + (" <i>(partial: not named)</i>" if n in partial else "") + (
+            f" <i>({html.escape(r)})</i>" if (r := rivals_text(n)) else "")
         rows.append(f"<tr><td>{label}</td><td>{n['scope']}</td><td>{html.escape(ps)}</td></tr>")
     eng = ""
     if "per_backend" in g:

@@ -1084,6 +1084,50 @@ def test_the_selftest_counts_names_won_by_a_close_call_and_the_wrong_ones_among_
     assert (s["names_with_close_rival"], s["wrong_names_with_close_rival"]) == (0, 0)
 
 
+def test_a_close_rival_is_worded_once_for_the_cli_and_the_report(tmp_path):
+    """A name won by a close call reads "barely ahead of X: BIC +d" (two decimals) in the CLI's
+    line and, escaped, in the report's table; a name without one reads as before."""
+    import json
+
+    from canebench.cli.discover import _rivals_text
+    from reports.discovery import section
+
+    won = {"effect": "modulus_scale", "scope": "global", "params": {"scale": 1.31}, "ci95": {"scale": [1.2, 1.4]},
+           "close_rivals": [{"candidate": "probe_misalignment", "bic_above": 0.186},
+                            {"candidate": "a<b", "bic_above": 1.5}]}
+    clear = {"effect": "root_compliance", "scope": "global", "params": {"k_root": 20.0}, "ci95": {}}
+    assert _rivals_text(won) == " (barely ahead of probe_misalignment: BIC +0.19, a<b: BIC +1.50)"
+    assert _rivals_text(clear) == ""
+    gap = {"median_abs_log_ratio": 0.3, "worst_abs_log_ratio": 0.9}
+    (tmp_path / "discovery.json").write_text(json.dumps(
+        {"baseline": "beam", "named": [won, clear], "unexplained": False, "gap": {"before": gap, "after_cv": gap}}))
+    html_ = section(tmp_path)
+    assert "modulus_scale <i>(barely ahead of probe_misalignment: BIC +0.19, a&lt;b: BIC +1.50)</i>" in html_
+    assert "<td>root_compliance</td>" in html_ and html_.count("barely ahead") == 1
+
+
+def test_the_selftest_counts_the_intervals_that_hold_the_truth(tmp_path):
+    """Per parameter and over all, the named parameters whose 95 % interval holds the truth
+    (``ci_covers_*``), counted from the rows as written to and read back from the CSV (where an
+    unnamed effect leaves the cell empty); a suite without the column counts none."""
+    from canebench.discovery.selftest import summarize
+
+    rows = pd.DataFrame([
+        {"kind": "single", "hidden": "modulus_scale", "err_scale": 0.05, "ci_covers_scale": True},
+        {"kind": "single", "hidden": "modulus_scale", "err_scale": 0.12, "ci_covers_scale": False},
+        {"kind": "single", "hidden": "root_compliance", "err_k_root": 0.02, "ci_covers_k_root": True},
+        {"kind": "single", "hidden": "root_compliance"},  # not named: no error, no interval
+        {"kind": "pair", "hidden": "modulus_scale+root_compliance", "err_scale": 0.01, "ci_covers_scale": True,
+         "err_k_root": 0.3, "ci_covers_k_root": False},
+    ]).assign(named="x", correct=True, unexplained=False, partial="", size=1.0, gap_before=1.0, gap_after_cv=0.5)
+    rows.to_csv(tmp_path / "rows.csv", index=False)
+    s = summarize(pd.read_csv(tmp_path / "rows.csv", keep_default_na=True))
+    assert (s["ci95_covers_scale"], s["ci95_covers_k_root"], s["ci95_covers_truth"]) == ("2/3", "1/2", "3/5")
+    assert "ci95_covers_k_rig" not in s
+    s = summarize(rows.drop(columns=["ci_covers_scale", "ci_covers_k_root"]))
+    assert s["ci95_covers_truth"] == "0/0" and "ci95_covers_scale" not in s
+
+
 def test_the_selftest_reports_each_done_when_criterion_against_the_issues_targets():
     """The issue's "done when" thresholds (90 % correct on large effects, all four parameters
     within 20 % there, at most 1 false name on the nulls, both pair members named, every

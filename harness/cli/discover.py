@@ -123,8 +123,10 @@ def main(a: argparse.Namespace) -> int:
 
 def _rivals_text(n: dict) -> str:
     """`` (barely ahead of X: BIC +0.71)`` for a name won by less than CLOSE_BIC, else ``""``."""
-    r = ", ".join(f"{c['candidate']}: BIC +{c['bic_above']:.2f}" for c in n.get("close_rivals") or [])
-    return f" (barely ahead of {r})" if r else ""
+    from ..discovery.checks_text import rivals_text
+
+    r = rivals_text(n)
+    return f" ({r})" if r else ""
 
 
 def _params_text(n: dict) -> str:

@@ -19,6 +19,13 @@ def _left_out(canes: list[str]) -> str:
     return f"{', '.join(canes)}, which scatter{'s' if len(canes) == 1 else ''} most"
 
 
+def rivals_text(named: dict[str, Any]) -> str:
+    """``barely ahead of X: BIC +0.71`` for a name in ``discovery.json`` won by less than
+    :data:`.selection.CLOSE_BIC` (its ``close_rivals``), else ``""``."""
+    r = ", ".join(f"{c['candidate']}: BIC +{c['bic_above']:.2f}" for c in named.get("close_rivals") or [])
+    return f"barely ahead of {r}" if r else ""
+
+
 def adequacy_lines(doc: dict[str, Any]) -> list[str]:
     """One sentence per adequacy check in ``doc["adequacy"]``, in the order the workflow runs them.
 

@@ -179,8 +179,8 @@ def forward_select(candidates: tuple[str, ...], at: Anchored, lkf: np.ndarray,
         # has the lowest BIC of all: it is tried only when it beats every single.)
         best = min(ok, key=lambda t: t["cv"].fit.bic) if ok else max(tried, key=lambda t: t["gain"])
         best["row"]["chosen"] = bool(ok)
-        close = sorted([("+".join(t["add"]), t["cv"].fit.bic - best["cv"].fit.bic) for t in ok
-                        if t is not best and t["cv"].fit.bic - best["cv"].fit.bic < CLOSE_BIC], key=lambda r: r[1])
+        gaps = [("+".join(t["add"]), t["cv"].fit.bic - best["cv"].fit.bic) for t in ok if t is not best]
+        close = sorted([(c, d) for c, d in gaps if d < CLOSE_BIC], key=lambda r: r[1])
         if close:
             best["row"]["close_rivals"] = "; ".join(f"{c} (BIC +{d:.2f})" for c, d in close)
             close_calls.append({"step": len(current) + 1, "chosen": best["add"], "rivals": close})

@@ -283,7 +283,11 @@ def run_selftest(out: str | Path, seed: int = 7, workers: int = 2, cases: list[d
 
 def _col(df: pd.DataFrame, col: str, empty: Any) -> pd.Series:
     """Column ``col`` with missing cells (and a missing column: older rows) as ``empty``, of its type."""
-    return df[col].fillna(empty).astype(type(empty)) if col in df else pd.Series(empty, index=df.index)
+    if col not in df:
+        return pd.Series(empty, index=df.index)
+    # as object first: a column read back from a CSV with every cell empty is float, which a text
+    # fill would not fit
+    return df[col].astype(object).where(df[col].notna(), empty).astype(type(empty))
 
 
 def _close_call_counts(df: pd.DataFrame) -> dict[str, int]:
@@ -332,6 +336,7 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         # names won by less than CLOSE_BIC (a rival reported beside them), and how many were wrong
         **_close_call_counts(df),
     }
+    covered = np.zeros(2, int)  # intervals holding the truth, intervals
     for p in ("scale", "k_root", "k_rig", "angle_deg"):
         c = f"err_{p}"
         if c in df:
@@ -341,6 +346,14 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
                 s[f"median_rel_err_{p}{tag}"] = float(v.median()) if len(v) else math.nan
                 s[f"max_rel_err_{p}{tag}"] = float(v.max()) if len(v) else math.nan
                 s[f"within_20pct_{p}{tag}"] = f"{int((v <= 0.2).sum())}/{len(v)}"
+        # how often the 95 % cane-bootstrap interval holds the truth, wherever the effect was named:
+        # it resamples canes only, so a miss can be the fitted model's bias against the generator's
+        # richer rod (tests/scripts/interval_coverage.py measures the intervals in the model itself)
+        if f"ci_covers_{p}" in df:
+            v = df[f"ci_covers_{p}"].dropna().astype(bool)
+            s[f"ci95_covers_{p}"] = f"{int(v.sum())}/{len(v)}"
+            covered += [int(v.sum()), len(v)]
+    s["ci95_covers_truth"] = f"{covered[0]}/{covered[1]}"
     # obstruction-only sets are left out: their "before" is already scored up to the onsets,
     # so their shrink is 0 by construction
     ok = df[df.kind.isin(["single", "pair"]) & df.correct & ~df.hidden.str.fullmatch("obstruction")]

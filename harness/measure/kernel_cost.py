@@ -31,7 +31,7 @@ class CostRbfPrefix(BaseCost):
         (1 when that median is 0), as ``ruptures.costs.CostRbf``.
     step : int
         Segment ends on multiples of ``step`` (and the signal's end) are summed ahead, in blocks;
-        any other end is summed from the Gram matrix directly (right, but not fast). Binary
+        any other end is summed from the signal directly (right, but not fast). Binary
         segmentation with ``jump=step`` only asks for the former. 1: every end.
 
     Each :meth:`fit` starts afresh (a default ``gamma`` is the new signal's median heuristic),
@@ -60,10 +60,9 @@ class CostRbfPrefix(BaseCost):
         if self.gamma is None:
             med = float(np.median(d2)) if d2.size else 0.0
             self.gamma = 1.0 / med if med != 0 else 1.0
-        # the clip keeps exp() away from under/overflow; the diagonal (distance 0) is exp(0) = 1
-        gram = squareform(np.exp(-np.clip(d2 * self.gamma, 1e-2, 1e2)))
+        # the diagonal (distance 0) is exp(0) = 1, as ruptures' squareform leaves it
+        gram = squareform(self._kernel(d2))
         np.fill_diagonal(gram, 1.0)
-        self._gram = gram
         ends = np.unique(np.r_[np.arange(0, n, self.step), n])
         # pos[i]: index i's place among the block ends, -1 if it is not one
         self._pos = np.full(n + 1, -1)
@@ -71,8 +70,12 @@ class CostRbfPrefix(BaseCost):
         blocks = np.add.reduceat(np.add.reduceat(gram, ends[:-1], axis=0), ends[:-1], axis=1) if n else gram
         sums = np.zeros((len(ends), len(ends)))
         sums[1:, 1:] = blocks.cumsum(axis=0).cumsum(axis=1)
-        self._sums = sums
+        self._sums = sums  # the Gram matrix itself is not kept (25 MB at 1,760 samples)
         return self
+
+    def _kernel(self, d2: np.ndarray) -> np.ndarray:
+        """The kernel of squared distances; the clip keeps exp() from under- and overflow."""
+        return np.exp(-np.clip(d2 * self.gamma, 1e-2, 1e2))
 
     def error(self, start: int, end: int) -> float:
         """Cost of the segment ``[start, end)``; raises NotEnoughPoints below ``min_size`` samples."""
@@ -83,5 +86,6 @@ class CostRbfPrefix(BaseCost):
             s = self._sums
             block = s[b, b] - s[a, b] - s[b, a] + s[a, a]
         else:
-            block = self._gram[start:end, start:end].sum()
+            # off the grid: the block from its own samples (the diagonal, distance 0, is exp(0) = 1)
+            block = (end - start) + 2.0 * self._kernel(pdist(self.signal[start:end], metric="sqeuclidean")).sum()
         return float((end - start) - block / (end - start))

@@ -444,10 +444,9 @@ def bench_contact(data: str | None = None, jump: int = 20) -> pd.DataFrame:
 
     import ruptures as rpt
 
+    from .. import canes
     from ..data.imu import read_imu_csv
     from ..measure.contact import PEN_FACTOR, _changepoints, imu_residuals
-
-    from .. import canes
 
     d = Path(data) if data else Path(canes.__file__).resolve().parent / "synthetic-contact"
     files = sorted((d / "trials").glob("*.imu.csv")) or sorted(d.glob("*.imu.csv"))
