@@ -60,7 +60,7 @@ class CostRbfPrefix(BaseCost):
         if self.gamma is None:
             med = float(np.median(d2)) if d2.size else 0.0
             self.gamma = 1.0 / med if med != 0 else 1.0
-        # the diagonal (distance 0) is exp(0) = 1, as ruptures' squareform leaves it
+        # ruptures clips the condensed distances before squareform, so its diagonal is exp(-0) = 1, unclipped
         gram = squareform(self._kernel(d2))
         np.fill_diagonal(gram, 1.0)
         ends = np.unique(np.r_[np.arange(0, n, self.step), n])
