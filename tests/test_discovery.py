@@ -1785,6 +1785,36 @@ def test_the_screen_carries_the_engines_response_to_a_pitched_probe():
 
 
 
+def test_a_cane_resample_draws_whole_canes_and_counts_each_copy_as_a_cane(bundled_trials):
+    """The cane bootstrap's unit is the cane: a resample holds all of a drawn cane's trials, in as
+    many groups as there are canes, a cane drawn twice being two groups (else the random cane
+    effect would see one cane with doubled trials, and a narrower spread between canes)."""
+    from canebench.discovery.fit import cane_resamples
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import Anchored, ScreenSet
+    from canebench.model.presets import PRESETS
+
+    ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in bundled_trials[:18]])
+    at = Anchored(ss, np.log(np.linspace(0.01, 0.3, len(ss.trials))))
+    own = {c: set(np.flatnonzero(ss.canes == c)) for c in np.unique(ss.canes)}
+    assert len(own) >= 4 and all(len(r) > 1 for r in own.values())  # the premise: canes of several trials
+    draws = list(cane_resamples(at, 30, seed=3))
+    assert len(draws) == 30
+    repeated = 0
+    for rows, sub in draws:
+        np.testing.assert_array_equal(sub.log_k, at.log_k[rows])  # the rows index the field data alike
+        groups = {g: set(rows[sub.screen.canes == g]) for g in np.unique(sub.screen.canes)}
+        assert len(groups) == len(own)
+        for g, r in groups.items():
+            assert r == own[g.split("#")[0]]  # a whole cane, and only that cane
+            assert np.sum(sub.screen.canes == g) == len(r)  # each of its trials once
+        repeated += len({g.split("#")[0] for g in groups}) < len(own)
+    assert repeated > 20  # with replacement: about 1 - n!/n^n of draws repeat a cane
+    again = list(cane_resamples(at, 30, seed=3))
+    assert all(np.array_equal(a[0], b[0]) for a, b in zip(draws, again))
+    assert not all(np.array_equal(a[0], b[0]) for a, b in zip(draws, cane_resamples(at, 30, seed=4)))
+
+
 def _scaled_bundled_screen(bundled_trials):
     """The bundled geometry's screen with a modulus scale of 1.5, cane offsets (0.15) and trial noise (0.03)."""
     from canebench.discovery.screen import trial_geometry

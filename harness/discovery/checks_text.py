@@ -2,8 +2,9 @@
 
 Both print the same checks from ``discovery.json`` (:meth:`.workflow.DiscoveryResult.to_json`),
 so they are worded once, here: the CLI indents the lines, the report escapes them into a
-list. So is a name's close rival (:func:`rivals_text`). The reasons a model is withheld (:func:`failure_reasons`), which the workflow writes
-into the result's own notes when a check fails, say more: what each failed check means.
+list. So is a name's close rival (:func:`rivals_text`). The reasons a model is withheld
+(:func:`failure_reasons`), which the workflow writes into the result's own notes when a check
+fails, say more: what each failed check means.
 """
 
 from __future__ import annotations

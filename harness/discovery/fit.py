@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 from scipy.optimize import minimize
@@ -399,20 +399,32 @@ def direction_test_p(name: str | tuple[str, ...] | list[tuple[str, ...]], at: An
     return flip_p(np.max(flips @ U, axis=1), obs, exact)
 
 
-def bootstrap_ci(fit: Fit, at: Anchored, log_k_field: np.ndarray,
-                 fixed: tuple[EffectSpec, ...] = (), n_boot: int = 100, seed: int = 0) -> dict[tuple[str, str], tuple[float, float]]:
-    """95 % percentile intervals of the free parameters, resampling canes (the independent units)."""
+def cane_resamples(at: Anchored, n: int, seed: int) -> Iterator[tuple[np.ndarray, Anchored]]:
+    """``n`` cane-bootstrap resamples of ``at``: canes drawn with replacement, each with all its trials.
+
+    Yields ``(rows, resample)``: the rows taken from ``at`` (to index the field stiffness the
+    same way) and the trials there as their own :class:`.Anchored`. A cane drawn twice is
+    relabelled as two canes (``"c#k"`` for its k-th place in the draw), so the random cane
+    effect treats each copy as its own group. :func:`bootstrap_ci` draws its intervals from
+    these; the same ``seed`` gives the same draws.
+    """
     rng = np.random.default_rng(seed)
     canes = at.screen.canes
     uniq = np.unique(canes)
     rows_of = {c: np.flatnonzero(canes == c) for c in uniq}
-    draws = []
-    for _ in range(n_boot):
+    for _ in range(n):
         pick = rng.choice(uniq, size=len(uniq), replace=True)
         rows = np.concatenate([rows_of[c] for c in pick])
-        # relabel repeated canes so each draw is its own group
         labels = np.concatenate([[f"{c}#{k}"] * len(rows_of[c]) for k, c in enumerate(pick)])
-        f = fit_candidate(fit.candidate, at.take(rows, labels), log_k_field[rows], fixed, x0=fit.x)
+        yield rows, at.take(rows, labels)
+
+
+def bootstrap_ci(fit: Fit, at: Anchored, log_k_field: np.ndarray,
+                 fixed: tuple[EffectSpec, ...] = (), n_boot: int = 100, seed: int = 0) -> dict[tuple[str, str], tuple[float, float]]:
+    """95 % percentile intervals of the free parameters, resampling canes (the independent units)."""
+    draws = []
+    for rows, sub in cane_resamples(at, n_boot, seed):
+        f = fit_candidate(fit.candidate, sub, log_k_field[rows], fixed, x0=fit.x)
         vals = {(sp.name, k): v for sp in f.specs[len(fixed):] for k, v in sp.params}
         draws.append([vals[key] for key in fit.candidate.free])
     arr = np.array(draws)

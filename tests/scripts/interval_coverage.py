@@ -15,8 +15,12 @@ data differ). One row per replicate: truth, fit, interval, and whether it covers
 variants are scored beside it from the same end points: the "basic" interval (reflected about
 the fit: 2 fit - hi, 2 fit - lo), and the percentile interval "widened" about the fit for G
 canes by t(0.975, G - 1) / z(0.975) * sqrt(G / (G - 1)) (Student's quantile for an estimated
-spread, and the bootstrap's variance (G - 1) / G of the cluster variance; 1.11 at 18 canes). The
-summary prints coverage per effect and overall.
+spread, and the bootstrap's variance (G - 1) / G of the cluster variance; 1.11 at 18 canes).
+Two more need no resampling: the likelihood-ratio interval of the fit's own objective
+(:func:`lr_interval`), cut at the chi-square's 95 % quantile (3.84) and at F(1, G - 1)'s (4.45
+at 18 canes: Student's t squared, since the cane offsets' variance is estimated from G canes).
+The summary prints coverage per effect and overall, and each interval's median width against
+the percentile interval's.
 
 ``--spread EFFECT:PARAM:VALUE [--reps N]`` instead compares spreads at one strength: the fitted
 parameter's (in the fit's own coordinate) over N datasets, against the bootstrap's within each
@@ -38,8 +42,10 @@ import pandas as pd
 from scipy import stats
 
 TRIAL_SD = 0.03
+SCAN = 60  # steps from the fit to each end of the search box, looking for the profile's first crossing
 
 
+@functools.lru_cache(maxsize=1)  # once per worker
 def _screen():
     from canebench.data.dataset import bundled_dataset, load_dataset
     from canebench.discovery.screen import trial_geometry
@@ -50,9 +56,48 @@ def _screen():
     return ss, -np.log(ss.c0 * 1e3)
 
 
-@functools.lru_cache(maxsize=1)
-def _screen_cached():
-    return _screen()
+def lr_interval(fit, at, lkf: np.ndarray, q: float) -> tuple[float, float]:
+    """A one-parameter fit's likelihood-ratio interval: where 2 (nll - nll at the fit) stays below ``q``.
+
+    The fit's own objective (:func:`~canebench.discovery.fit.nll`, cane and trial variances
+    profiled in closed form), scanned in the fit's coordinate (log for a log parameter) out to
+    the search box; an end that the box cuts off is the box's.
+    """
+    from scipy.optimize import brentq
+
+    from canebench.discovery.fit import nll
+    from canebench.model.effects import AppliedEffects
+
+    cand, groups = fit.candidate, at.screen.canes
+    if len(cand.free) != 1 or AppliedEffects([sp.instance() for sp in cand.specs(fit.x)]).changes_diameter:
+        # fit.nll then also holds the calipers' penalty, which this profile leaves out
+        raise ValueError(f"lr_interval takes one free parameter of an effect that keeps the diameters, not {cand.names}")
+    (blo,), (bhi,) = cand.box()
+    x_hat = float(fit.x[0])
+
+    def excess(x: float) -> float:
+        return 2 * (nll(lkf - at.predict(cand.specs(np.array([x]))), groups) - fit.nll) - q
+
+    ends = []
+    for bound in (blo, bhi):
+        # the first crossing out from the fit, not any: a pitch's profile falls again toward the
+        # mirror angle (the 1/cos^2 part is even in the angle), so bracket on a walk outward
+        xs = np.linspace(x_hat, bound, SCAN + 1)
+        prev, end = x_hat, bound
+        for x in xs[1:]:
+            if excess(x) > 0:
+                end = brentq(excess, prev, x, xtol=1e-10)
+                break
+            prev = x
+        ends.append(end)
+    (name, par), = cand.free
+    return tuple(dict(cand.specs(np.array([e]))[0].params)[par] for e in ends)
+
+
+@functools.lru_cache(maxsize=None)
+def _widening(g: int) -> float:
+    """The percentile interval's widening about the fit for ``g`` canes (see the module docstring)."""
+    return stats.t.ppf(0.975, g - 1) / stats.norm.ppf(0.975) * np.sqrt(g / (g - 1))
 
 
 def one(job: tuple[str, int, int, int]) -> dict:
@@ -62,7 +107,7 @@ def one(job: tuple[str, int, int, int]) -> dict:
     from canebench.discovery.selftest import COMPARED
     from canebench.model.effects import EffectSpec
 
-    ss, lkb = _screen_cached()  # once per worker
+    ss, lkb = _screen()
     at = Anchored(ss, lkb)
     name, rep, seed, n_boot = job
     rng = np.random.default_rng([seed, list(COMPARED).index(name), rep])
@@ -75,24 +120,28 @@ def one(job: tuple[str, int, int, int]) -> dict:
     value = dict(fit.specs[0].params)[lib_param]
     lo, hi = bootstrap_ci(fit, at, lkf, n_boot=n_boot, seed=rep)[(name, lib_param)]
     blo, bhi = 2 * value - hi, 2 * value - lo
-    g = len(canes)
-    w = stats.t.ppf(0.975, g - 1) / stats.norm.ppf(0.975) * np.sqrt(g / (g - 1))
+    w = _widening(len(canes))
     # a percentile interval need not hold the fit: widen only the distances on its side
     wlo, whi = value - w * max(value - lo, 0.0), value + w * max(hi - value, 0.0)
+    # likelihood-ratio intervals: the chi-square's quantile, and F(1, G - 1)'s (Student's t squared:
+    # the cane offsets' variance is estimated from G canes, as a between-cane effect's is)
+    llo, lhi = lr_interval(fit, at, lkf, stats.chi2.ppf(0.95, 1))
+    flo, fhi = lr_interval(fit, at, lkf, stats.f.ppf(0.95, 1, len(canes) - 1))
     return {"effect": name, "rep": rep, "seed": seed, "n_boot": n_boot, "truth": truth, "fit": value, "lo": lo, "hi": hi,
             "rel_err": abs(value / truth - 1), "covers": lo <= truth <= hi, "basic_covers": blo <= truth <= bhi,
-            "widened_covers": wlo <= truth <= whi,
+            "widened_covers": wlo <= truth <= whi, "lr_lo": llo, "lr_hi": lhi, "lr_covers": llo <= truth <= lhi,
+            "lrf_lo": flo, "lrf_hi": fhi, "lrf_covers": flo <= truth <= fhi,
             "truth_above": truth > hi, "truth_below": truth < lo}
 
 
 def spread(name: str, param: str, value: float, n: int, n_boot: int) -> None:
     """Print the sampling spread of the fitted coordinate over ``n`` datasets, and the bootstrap's."""
     from canebench.canes.generate_hidden import MODULUS_LOG_SD
-    from canebench.discovery.fit import Candidate, fit_candidate
+    from canebench.discovery.fit import Candidate, cane_resamples, fit_candidate
     from canebench.discovery.screenset import Anchored
     from canebench.model.effects import EffectSpec
 
-    ss, lkb = _screen_cached()
+    ss, lkb = _screen()
     at = Anchored(ss, lkb)
     canes, inv = np.unique(ss.canes, return_inverse=True)
     rng = np.random.default_rng(11)
@@ -103,15 +152,9 @@ def spread(name: str, param: str, value: float, n: int, n_boot: int) -> None:
         data.append((lkf, fit_candidate(Candidate.of((name,)), at, lkf)))
     xs = np.array([f.x[0] for _, f in data])
     print(f"{name} {param} = {value}: fitted coordinate over {n} datasets, mean {xs.mean():.4f}, sd {xs.std(ddof=1):.4f}")
-    rows_of = {c: np.flatnonzero(ss.canes == c) for c in canes}
     for lkf, f in data[:4]:
-        rb = np.random.default_rng(0)
         warm, fresh = [], []
-        for _ in range(n_boot):
-            pick = rb.choice(canes, size=len(canes), replace=True)
-            rows = np.concatenate([rows_of[c] for c in pick])
-            labels = np.concatenate([[f"{c}#{k}"] * len(rows_of[c]) for k, c in enumerate(pick)])
-            sub = at.take(rows, labels)
+        for rows, sub in cane_resamples(at, n_boot, seed=0):  # bootstrap_ci's draws
             warm.append(fit_candidate(f.candidate, sub, lkf[rows], x0=f.x).x[0])
             fresh.append(fit_candidate(f.candidate, sub, lkf[rows]).x[0])
         warm, fresh = np.array(warm), np.array(fresh)
@@ -140,13 +183,20 @@ def main(argv: list[str]) -> None:
     df = pd.DataFrame(rows)
     df.to_csv(a.out, index=False)
     by = df.groupby("effect").agg(n=("covers", "size"), covered=("covers", "sum"), basic=("basic_covers", "sum"),
-                                  widened=("widened_covers", "sum"),
+                                  widened=("widened_covers", "sum"), lr=("lr_covers", "sum"),
+                                  lr_f=("lrf_covers", "sum"),
                                   above=("truth_above", "sum"), below=("truth_below", "sum"),
                                   median_err=("rel_err", "median"), max_err=("rel_err", "max"))
     print(by.to_string())
     print(f"all: percentile {int(df.covers.sum())}/{len(df)} ({df.covers.mean():.1%}), "
           f"basic {int(df.basic_covers.sum())}/{len(df)} ({df.basic_covers.mean():.1%}), "
-          f"widened {int(df.widened_covers.sum())}/{len(df)} ({df.widened_covers.mean():.1%})")
+          f"widened {int(df.widened_covers.sum())}/{len(df)} ({df.widened_covers.mean():.1%}), "
+          f"likelihood ratio {int(df.lr_covers.sum())}/{len(df)} ({df.lr_covers.mean():.1%}), "
+          f"with F(1, G-1) {int(df.lrf_covers.sum())}/{len(df)} ({df.lrf_covers.mean():.1%})")
+    # each variant's width against the percentile interval's, so its coverage is read beside its cost
+    width = df.hi - df.lo
+    for col, (lo, hi) in {"likelihood ratio": ("lr_lo", "lr_hi"), "F(1, G-1)": ("lrf_lo", "lrf_hi")}.items():
+        print(f"  median width against the percentile interval's, {col}: {((df[hi] - df[lo]) / width).median():.3f}")
 
 
 if __name__ == "__main__":
