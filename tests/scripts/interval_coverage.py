@@ -42,7 +42,10 @@ import pandas as pd
 from scipy import stats
 
 TRIAL_SD = 0.03
-SCAN = 60  # steps from the fit to each end of the search box, looking for the profile's first crossing
+#: steps from the fit to each end of the search box, looking for the profile's first crossing: about
+#: 0.1 in ln for a log parameter and 1.35 degrees for a pitch, under the intervals' half-widths here
+#: (a narrower dip of the profile could still be stepped over)
+SCAN = 60
 
 
 @functools.lru_cache(maxsize=1)  # once per worker
@@ -59,8 +62,9 @@ def _screen():
 def lr_interval(fit, at, lkf: np.ndarray, q: float) -> tuple[float, float]:
     """A one-parameter fit's likelihood-ratio interval: where 2 (nll - nll at the fit) stays below ``q``.
 
-    The fit's own objective (:func:`~canebench.discovery.fit.nll`, cane and trial variances
-    profiled in closed form), scanned in the fit's coordinate (log for a log parameter) out to
+    The fit's own objective (:func:`~canebench.discovery.fit.nll`, with the cane and trial
+    variances at their moment estimates at each point, as in the fit: not their maximum-likelihood
+    values, so the cut's coverage is measured, not assured), scanned in the fit's coordinate (log for a log parameter) out to
     the search box; an end that the box cuts off is the box's.
     """
     from scipy.optimize import brentq
