@@ -17,7 +17,7 @@ the fit: 2 fit - hi, 2 fit - lo), and the percentile interval "widened" about th
 canes by t(0.975, G - 1) / z(0.975) * sqrt(G / (G - 1)) (Student's quantile for an estimated
 spread, and the bootstrap's variance (G - 1) / G of the cluster variance; 1.11 at 18 canes).
 Two more need no resampling: the likelihood-ratio interval of the fit's own objective
-(:func:`lr_interval`), cut at the chi-square's 95 % quantile (3.84) and at F(1, G - 1)'s (4.45
+(:func:`lr_intervals`), cut at the chi-square's 95 % quantile (3.84) and at F(1, G - 1)'s (4.45
 at 18 canes: Student's t squared, since the cane offsets' variance is estimated from G canes).
 The summary prints coverage per effect and overall, and each interval's median width against
 the percentile interval's.
@@ -59,13 +59,14 @@ def _screen():
     return ss, -np.log(ss.c0 * 1e3)
 
 
-def lr_interval(fit, at, lkf: np.ndarray, q: float) -> tuple[float, float]:
-    """A one-parameter fit's likelihood-ratio interval: where 2 (nll - nll at the fit) stays below ``q``.
+def lr_intervals(fit, at, lkf: np.ndarray, *qs: float) -> list[tuple[float, float]]:
+    """A one-parameter fit's likelihood-ratio intervals: where 2 (nll - nll at the fit) stays below each ``q``.
 
     The fit's own objective (:func:`~canebench.discovery.fit.nll`, with the cane and trial
     variances at their moment estimates at each point, as in the fit: not their maximum-likelihood
-    values, so the cut's coverage is measured, not assured), scanned in the fit's coordinate (log for a log parameter) out to
-    the search box; an end that the box cuts off is the box's.
+    values, so the cut's coverage is measured, not assured), scanned in the fit's coordinate (log
+    for a log parameter) out to the search box; an end that the box cuts off is the box's. One
+    walk serves every cut.
     """
     from scipy.optimize import brentq
 
@@ -75,27 +76,37 @@ def lr_interval(fit, at, lkf: np.ndarray, q: float) -> tuple[float, float]:
     cand, groups = fit.candidate, at.screen.canes
     if len(cand.free) != 1 or AppliedEffects([sp.instance() for sp in cand.specs(fit.x)]).changes_diameter:
         # fit.nll then also holds the calipers' penalty, which this profile leaves out
-        raise ValueError(f"lr_interval takes one free parameter of an effect that keeps the diameters, not {cand.names}")
+        raise ValueError(f"lr_intervals takes one free parameter of an effect that keeps the diameters, not {cand.names}")
     (blo,), (bhi,) = cand.box()
     x_hat = float(fit.x[0])
 
-    def excess(x: float) -> float:
-        return 2 * (nll(lkf - at.predict(cand.specs(np.array([x]))), groups) - fit.nll) - q
+    def rise(x: float) -> float:
+        return 2 * (nll(lkf - at.predict(cand.specs(np.array([x]))), groups) - fit.nll)
 
-    ends = []
+    ends: dict[float, list[float]] = {q: [] for q in qs}
     for bound in (blo, bhi):
         # the first crossing out from the fit, not any: a pitch's profile falls again toward the
         # mirror angle (the 1/cos^2 part is even in the angle), so bracket on a walk outward
         xs = np.linspace(x_hat, bound, SCAN + 1)
-        prev, end = x_hat, bound
-        for x in xs[1:]:
-            if excess(x) > 0:
-                end = brentq(excess, prev, x, xtol=1e-10)
-                break
-            prev = x
-        ends.append(end)
-    (name, par), = cand.free
-    return tuple(dict(cand.specs(np.array([e]))[0].params)[par] for e in ends)
+        rises = [0.0]
+        for q in qs:
+            while len(rises) < len(xs) and rises[-1] <= q:
+                rises.append(rise(xs[len(rises)]))
+            above = [i for i, r in enumerate(rises) if r > q]
+            ends[q].append(brentq(lambda x: rise(x) - q, xs[above[0] - 1], xs[above[0]], xtol=1e-10) if above
+                           else bound)
+    (_, par), = cand.free
+    return [tuple(dict(cand.specs(np.array([e]))[0].params)[par] for e in ends[q]) for q in qs]
+
+
+def print_lr_summary(df: pd.DataFrame) -> None:
+    """Coverage of the two likelihood-ratio cuts, and each one's median width against the percentile interval's."""
+    n = len(df)
+    print(f"  likelihood ratio {int(df.lr_covers.sum())}/{n} ({df.lr_covers.mean():.1%}), "
+          f"with F(1, G-1) {int(df.lrf_covers.sum())}/{n} ({df.lrf_covers.mean():.1%})")
+    width = df.hi - df.lo  # so a variant's coverage is read beside its cost
+    for col, (lo, hi) in {"likelihood ratio": ("lr_lo", "lr_hi"), "F(1, G-1)": ("lrf_lo", "lrf_hi")}.items():
+        print(f"  median width against the percentile interval's, {col}: {((df[hi] - df[lo]) / width).median():.3f}")
 
 
 @functools.lru_cache(maxsize=None)
@@ -129,8 +140,7 @@ def one(job: tuple[str, int, int, int]) -> dict:
     wlo, whi = value - w * max(value - lo, 0.0), value + w * max(hi - value, 0.0)
     # likelihood-ratio intervals: the chi-square's quantile, and F(1, G - 1)'s (Student's t squared:
     # the cane offsets' variance is estimated from G canes, as a between-cane effect's is)
-    llo, lhi = lr_interval(fit, at, lkf, stats.chi2.ppf(0.95, 1))
-    flo, fhi = lr_interval(fit, at, lkf, stats.f.ppf(0.95, 1, len(canes) - 1))
+    (llo, lhi), (flo, fhi) = lr_intervals(fit, at, lkf, stats.chi2.ppf(0.95, 1), stats.f.ppf(0.95, 1, len(canes) - 1))
     return {"effect": name, "rep": rep, "seed": seed, "n_boot": n_boot, "truth": truth, "fit": value, "lo": lo, "hi": hi,
             "rel_err": abs(value / truth - 1), "covers": lo <= truth <= hi, "basic_covers": blo <= truth <= bhi,
             "widened_covers": wlo <= truth <= whi, "lr_lo": llo, "lr_hi": lhi, "lr_covers": llo <= truth <= lhi,
@@ -194,14 +204,8 @@ def main(argv: list[str]) -> None:
     print(by.to_string())
     print(f"all: percentile {int(df.covers.sum())}/{len(df)} ({df.covers.mean():.1%}), "
           f"basic {int(df.basic_covers.sum())}/{len(df)} ({df.basic_covers.mean():.1%}), "
-          f"widened {int(df.widened_covers.sum())}/{len(df)} ({df.widened_covers.mean():.1%}), "
-          f"likelihood ratio {int(df.lr_covers.sum())}/{len(df)} ({df.lr_covers.mean():.1%}), "
-          f"with F(1, G-1) {int(df.lrf_covers.sum())}/{len(df)} ({df.lrf_covers.mean():.1%})")
-    # each variant's width against the percentile interval's, so its coverage is read beside its cost
-    width = df.hi - df.lo
-    for col, (lo, hi) in {"likelihood ratio": ("lr_lo", "lr_hi"), "F(1, G-1)": ("lrf_lo", "lrf_hi")}.items():
-        print(f"  median width against the percentile interval's, {col}: {((df[hi] - df[lo]) / width).median():.3f}")
-
+          f"widened {int(df.widened_covers.sum())}/{len(df)} ({df.widened_covers.mean():.1%})")
+    print_lr_summary(df)
 
 if __name__ == "__main__":
     main(sys.argv[1:])

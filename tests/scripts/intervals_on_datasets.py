@@ -10,7 +10,7 @@ without the confirmation, which comes after the intervals). Each case runs
 output under ``OUT/<case>``, with the final model's bootstrap call recorded. Where that model is
 one global effect with one parameter that keeps the diameters (a modulus scale, root or rig
 spring, or probe pitch), the likelihood-ratio intervals of ``interval_coverage.py``
-(:func:`lr_interval`, cut at chi-square(1)'s and F(1, G - 1)'s 95 % quantiles) are computed
+(:func:`lr_intervals`, cut at chi-square(1)'s and F(1, G - 1)'s 95 % quantiles) are computed
 from the same fit, screen and data, and each interval is scored against the truth's value.
 
 This is ``interval_coverage.py``'s question asked where the truth is richer than the fitted model
@@ -29,8 +29,7 @@ import pandas as pd
 from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # interval_coverage, beside this script
-from interval_coverage import lr_interval  # noqa: E402
-
+from interval_coverage import lr_intervals, print_lr_summary  # noqa: E402
 
 
 def _case(spec: str) -> tuple[str, Path, Path, int, int]:
@@ -92,12 +91,11 @@ def _one(spec: str, out: str) -> dict:
     value = dict(fit.specs[-1].params)[par]
     t = float(truth[effect][COMPARED[effect][0]])  # the generator's name of the parameter
     lo, hi = ci[(effect, par)]
-    llo, lhi = lr_interval(fit, at, lkf, stats.chi2.ppf(0.95, 1))
-    flo, fhi = lr_interval(fit, at, lkf, stats.f.ppf(0.95, 1, g - 1))
     # the recorded call must be the final model's: its fit and interval are the ones the run wrote
     if not (np.isclose(named[0]["params"][par], value) and np.allclose(named[0]["ci95"][par], [lo, hi])):
         row["why_not"] = f"the last bootstrap call ({value}, [{lo}, {hi}]) is not the named model's"
         return row
+    (llo, lhi), (flo, fhi) = lr_intervals(fit, at, lkf, stats.chi2.ppf(0.95, 1), stats.f.ppf(0.95, 1, g - 1))
     row.update(effect=effect, truth=t, fit=value, rel_err=abs(value / t - 1), lo=lo, hi=hi, lr_lo=llo, lr_hi=lhi,
                lrf_lo=flo, lrf_hi=fhi, covers=lo <= t <= hi, lr_covers=llo <= t <= lhi, lrf_covers=flo <= t <= fhi)
     return row
@@ -117,15 +115,12 @@ def main(argv: list[str]) -> None:
             rows.append(row)
             pd.DataFrame(rows).to_csv(a.out / "intervals.csv", index=False)  # kept as the cases finish
     df = pd.DataFrame(rows)
-    scored = df[df["why_not"].fillna("") == ""] if "covers" in df else df.iloc[:0]  # fillna: as read back
+    ok = df["why_not"].isna() | (df["why_not"] == "")  # isna: an all-empty column as read back
+    scored = df[ok] if "covers" in df else df.iloc[:0]
     n = len(scored)
     if n:
-        print(f"{n} of {len(df)} cases scored: percentile {int(scored.covers.sum())}/{n}, likelihood ratio "
-              f"{int(scored.lr_covers.sum())}/{n}, with F(1, G-1) {int(scored.lrf_covers.sum())}/{n}")
-        width = scored.hi - scored.lo
-        for col, (lo, hi) in {"likelihood ratio": ("lr_lo", "lr_hi"), "F(1, G-1)": ("lrf_lo", "lrf_hi")}.items():
-            print(f"  median width against the percentile interval's, {col}: "
-                  f"{((scored[hi] - scored[lo]) / width).median():.3f}")
+        print(f"{n} of {len(df)} cases scored: percentile {int(scored.covers.sum())}/{n}")
+        print_lr_summary(scored)
     else:
         print(f"none of {len(df)} cases could be scored")
 
