@@ -100,7 +100,11 @@ def lr_intervals(fit, at, lkf: np.ndarray, *qs: float) -> list[tuple[float, floa
 
 
 def print_lr_summary(df: pd.DataFrame) -> None:
-    """Coverage of the two likelihood-ratio cuts, and each one's median width against the percentile interval's."""
+    """Coverage of the two likelihood-ratio cuts, and each one's median width against the percentile interval's.
+
+    Rows without intervals (a case that could not be scored) are left out, so a count is of scored rows.
+    """
+    df = df[df.lr_covers.notna()]
     n = len(df)
     print(f"  likelihood ratio {int(df.lr_covers.sum())}/{n} ({df.lr_covers.mean():.1%}), "
           f"with F(1, G-1) {int(df.lrf_covers.sum())}/{n} ({df.lrf_covers.mean():.1%})")
