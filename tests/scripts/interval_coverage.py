@@ -99,12 +99,17 @@ def lr_intervals(fit, at, lkf: np.ndarray, *qs: float) -> list[tuple[float, floa
     return [tuple(dict(cand.specs(np.array([e]))[0].params)[par] for e in ends[q]) for q in qs]
 
 
+def scored_rows(df: pd.DataFrame) -> pd.DataFrame:
+    """The rows that hold intervals: a case that could not be scored has none (and maybe no such column)."""
+    return df[df.lr_covers.notna()] if "lr_covers" in df else df.iloc[:0]
+
+
 def print_lr_summary(df: pd.DataFrame) -> None:
     """Coverage of the two likelihood-ratio cuts, and each one's median width against the percentile interval's.
 
-    Rows without intervals (a case that could not be scored) are left out, so a count is of scored rows.
+    Counts are of :func:`scored_rows`.
     """
-    df = df[df.lr_covers.notna()]
+    df = scored_rows(df)
     n = len(df)
     print(f"  likelihood ratio {int(df.lr_covers.sum())}/{n} ({df.lr_covers.mean():.1%}), "
           f"with F(1, G-1) {int(df.lrf_covers.sum())}/{n} ({df.lrf_covers.mean():.1%})")
@@ -210,6 +215,7 @@ def main(argv: list[str]) -> None:
           f"basic {int(df.basic_covers.sum())}/{len(df)} ({df.basic_covers.mean():.1%}), "
           f"widened {int(df.widened_covers.sum())}/{len(df)} ({df.widened_covers.mean():.1%})")
     print_lr_summary(df)
+
 
 if __name__ == "__main__":
     main(sys.argv[1:])

@@ -29,7 +29,7 @@ import pandas as pd
 from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # interval_coverage, beside this script
-from interval_coverage import lr_intervals, print_lr_summary  # noqa: E402
+from interval_coverage import lr_intervals, print_lr_summary, scored_rows  # noqa: E402
 
 
 def _case(spec: str) -> tuple[str, Path, Path, int, int]:
@@ -115,8 +115,7 @@ def main(argv: list[str]) -> None:
             rows.append(row)
             pd.DataFrame(rows).to_csv(a.out / "intervals.csv", index=False)  # kept as the cases finish
     df = pd.DataFrame(rows)
-    ok = df["why_not"].isna() | (df["why_not"] == "")  # isna: an all-empty column as read back
-    scored = df[ok] if "covers" in df else df.iloc[:0]
+    scored = scored_rows(df)
     n = len(scored)
     if n:
         print(f"{n} of {len(df)} cases scored: percentile {int(scored.covers.sum())}/{n}")
