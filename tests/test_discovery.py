@@ -2191,3 +2191,38 @@ def test_only_an_unnamed_flare_may_take_a_trend_along_the_canes():
     assert within_takers(lib, ("modulus_scale",), []) == ("base_flare",)
     assert within_takers(lib, ("modulus_scale", "base_flare"), []) == ()
     assert within_takers(lib, ("modulus_scale",), [{"effect": "base_flare"}]) == ()
+
+
+def test_a_trial_left_out_of_the_scoring_says_why_in_the_json():
+    """A very stiff cane reaches the rig's 1000 gf stop a few steps after contact (an independent
+    generator's canes held by a neighbour: 78 -> 988 gf in four rows). Its trace has too few contact
+    samples for a slope, so it has no residual; it must still be listed, with the field fit's reason,
+    not vanish from the output. So must a trial the baseline engine failed on."""
+    from types import SimpleNamespace
+
+    from canebench.data.rig import RigTrial
+    from canebench.discovery.workflow import DiscoveryResult, not_scored_reason
+    from canebench.measure.field import MIN_CONTACT_SAMPLES, extract_field_stiffness
+
+    rng = np.random.default_rng(5)
+    x = np.arange(0.0, 10.0, 0.5)
+    f = -27.0 + rng.normal(0, 3.0, len(x))
+    f[16:] += 100.0 + 300.0 * np.arange(len(x) - 16)  # 100, 400, 700, 1000 gf above the tare
+    ff = extract_field_stiffness(RigTrial("stiff.csv", x, f, 0.5 * np.arange(len(x)), 560.0), n_boot=20)
+    assert not ff.usable and ff.fault == "contact_samples" and ff.n_contact < MIN_CONTACT_SAMPLES, ff.reason
+    fr = SimpleNamespace(fit=ff, reason="", k=ff.k_n_per_mm)
+    why = not_scored_reason("stiff", fr, {}, {"stiff": 0.2}, {})
+    assert why.startswith("no field stiffness: only ") and "contact samples" in why, why
+    good = SimpleNamespace(fit=None, reason="", k=0.3)
+    assert not_scored_reason("sim", good, {}, {"sim": math.nan}, {"sim": "diverged: |v| > 10 m/s"}) == \
+        "no baseline stiffness: diverged: |v| > 10 m/s"
+    trials = pd.DataFrame({"trial": ["a", "stiff", "sim"], "cane": ["c1", "c1", "c1"],
+                           "obstruction_onset_mm": [math.nan] * 3, "early_contact_mm": [math.nan] * 3,
+                           "r_before": [0.1, math.nan, math.nan], "r_after_cv": [0.05, math.nan, math.nan],
+                           "not_scored": ["", why, "no baseline stiffness: diverged: |v| > 10 m/s"]})
+    res = DiscoveryResult("beam", [], False, {}, trials, pd.DataFrame(), pd.DataFrame(), pd.DataFrame(),
+                          ModelConfig())
+    rows = {r["trial"]: r for r in json.loads(json.dumps(res.to_json()))["trials"]}
+    assert rows["a"]["scored"] and "not_scored" not in rows["a"]
+    assert not rows["stiff"]["scored"] and rows["stiff"]["not_scored"] == why
+    assert not rows["sim"]["scored"] and rows["sim"]["not_scored"].startswith("no baseline stiffness")

@@ -165,6 +165,10 @@ class DiscoveryResult:
             if np.isfinite(getattr(r, "early_contact_mm", math.nan)):
                 row["early_contact_mm"] = float(r.early_contact_mm)
                 row["excluded"] = True  # a soft contact before the field stage's knee: not scored
+            why = getattr(r, "not_scored", "")
+            row["scored"] = not (isinstance(why, str) and why)
+            if not row["scored"]:
+                row["not_scored"] = why
             tr.append(row)
         return {"baseline": self.baseline, "named": self.named, "unexplained": bool(self.unexplained),
                 "partial": self.partial, "unsupported": self.unsupported,
@@ -355,6 +359,15 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     feats["k_field"] = [fields[t].k for t in feats.trial]
     usable = (np.isfinite(feats.k_base) & np.isfinite(feats.k_field) & (feats.k_base > 0) & (feats.k_field > 0)
               & ~feats.trial.isin(list(early)))
+    # a trial left out of the scoring says why, in the table, the JSON and the notes: a trace too
+    # short to fit (a very stiff cane that reaches the rig's stop in a few steps) must not vanish
+    sim_why = dict(zip(res.trial, res.reason.fillna("").astype(str))) if "reason" in res else {}
+    feats["not_scored"] = [not_scored_reason(t, fields.get(t), early, k_base, sim_why) if not u else ""
+                           for t, u in zip(feats.trial, usable)]
+    if (~usable).any():
+        left = feats[~usable]
+        notes.append(f"{len(left)} of {len(feats)} trials not scored: "
+                     + "; ".join(f"{t} ({why})" for t, why in zip(left.trial, left.not_scored)))
     if usable.sum() < 6 or feats[usable].cane.nunique() < 3:
         from ..errors import InputError
 
@@ -558,6 +571,22 @@ def mark_close_calls(named: list[dict], close_calls: list[dict]) -> list[str]:
                      + f" (under {CLOSE_BIC:g}: a Bayes factor under e, which the data barely support); read the "
                        "name with that rival beside it")
     return notes
+
+
+def not_scored_reason(tid: str, fr: Any, early: dict, k_base: dict[str, float], sim_why: dict[str, str]) -> str:
+    """Why trial ``tid`` has no residual: a contact before the field stage's knee, no usable field
+    slope (the field fit's own reason), or no baseline stiffness (the engine's reason)."""
+    if tid in early:
+        return (f"a soft contact from {early[tid].contact_mm:.1f} mm of travel and a second body "
+                f"{early[tid].onset_mm:.1f} mm after it: the trace's slope is the second body's")
+    k_f = fr.k if fr is not None else math.nan
+    if not (np.isfinite(k_f) and k_f > 0):
+        why = (fr.reason or (fr.fit.reason if fr.fit is not None else "")) if fr is not None else ""
+        return f"no field stiffness: {why or 'no field fit'}"
+    k_b = k_base.get(tid, math.nan)
+    if not (np.isfinite(k_b) and k_b > 0):
+        return f"no baseline stiffness: {sim_why.get(tid) or 'the engine gave none'}"
+    return "not scored"
 
 
 def unscored_onsets(onsets: dict[str, float], fields: dict) -> dict[str, str]:
