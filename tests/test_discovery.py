@@ -2139,11 +2139,11 @@ def test_a_fitted_flare_carries_the_note_that_a_support_below_the_pushes_looks_t
 def test_an_elbow_that_spoils_the_line_is_found_and_scored_up_to_it():
     """A second body engaging partway leaves the whole trace no line (R^2 < 0.8), the one fault
     that makes a trace unusable by itself: its elbow is searched all the same, and up to it the
-    trace is the cane's line. A trial whose refit is still no line is named but not scored."""
+    trace is the cane's line. A trial whose refit is still no line is named but not scored, and says why."""
     from types import SimpleNamespace
 
     from canebench.data.rig import RigTrial
-    from canebench.discovery.workflow import field_onsets, unscored_onsets
+    from canebench.discovery.workflow import field_onsets, not_scored_reason
     from canebench.measure.field import extract_field_stiffness
     from canebench.units import GF_TO_N
 
@@ -2163,8 +2163,10 @@ def test_an_elbow_that_spoils_the_line_is_found_and_scored_up_to_it():
     flat = extract_field_stiffness(RigTrial("flat.csv", x, -50.0 + 0.2 * contact + rng.normal(0, 1.0, len(x)),
                                             0.5 * np.arange(len(x)), 700.0), n_boot=50)
     assert not flat.usable and not flat.only_poorly_linear
-    fields = {"t": SimpleNamespace(fit=before, reason=""), "n": SimpleNamespace(fit=ff, reason=ff.reason)}
-    assert unscored_onsets({"t": 30.0, "n": 30.0, "gone": 9.0}, fields) == {"n": ff.reason, "gone": "no field fit"}
+    # a trace still no line up to its elbow is not scored, with the field fit's reason
+    assert not_scored_reason("n", SimpleNamespace(fit=ff, reason=ff.reason, k=ff.k_n_per_mm), {}, {"n": 0.1}, {}) \
+        == f"no field stiffness: {ff.reason}"
+    assert not_scored_reason("gone", None, {}, {}, {}) == "no field stiffness: no field fit"
 
 
 def test_a_pair_member_that_passed_alone_is_not_dropped_with_its_partner():
@@ -2226,3 +2228,83 @@ def test_a_trial_left_out_of_the_scoring_says_why_in_the_json():
     assert rows["a"]["scored"] and "not_scored" not in rows["a"]
     assert not rows["stiff"]["scored"] and rows["stiff"]["not_scored"] == why
     assert not rows["sim"]["scored"] and rows["sim"]["not_scored"].startswith("no baseline stiffness")
+
+
+def _stiff_rig_csv(path, height_mm):
+    """A rig file (the field format) of a cane held so stiffly that the rig reaches its 1000 gf stop
+    four samples after contact (an independent generator's cane braced by a neighbour)."""
+    rng = np.random.default_rng(5)
+    n = 20
+    f = -27.0 + rng.normal(0, 3.0, n)
+    f[16:] += 100.0 + 300.0 * np.arange(n - 16)
+    pd.DataFrame({"Iteration": np.arange(2, n + 2, dtype=float), "Time Stamp": 31907.0 + 500.0 * np.arange(n),
+                  "Load Cell Reading (gf)": f.round(2), "Displacement (mm)": 117.0 + 0.5 * np.arange(n),
+                  "Height (mm)": height_mm}).to_csv(path, index=False)
+
+
+def _bundled_subset(dst, bushes, stiff):
+    """The bundled dataset's ``bushes`` copied to ``dst``, with the trials in ``stiff`` replaced by
+    :func:`_stiff_rig_csv` records."""
+    import shutil
+
+    from canebench.data.dataset import bundled_dataset
+
+    shutil.copytree(bundled_dataset(), dst)
+    pp = pd.read_csv(dst / "push_points.csv")
+    pp = pp[pp.bush.isin(bushes)]
+    pp.to_csv(dst / "push_points.csv", index=False)
+    for y in (dst / "canes").glob("*.yaml"):
+        if int(y.stem[1:].split("c")[0]) not in bushes:
+            y.unlink()
+    for r in pp.itertuples():
+        if f"b{r.bush}c{r.cane}t{r.trial}" in stiff:
+            _stiff_rig_csv(dst / r.file, r.height_mm)
+    return dst
+
+
+def test_discover_lists_a_trial_it_cannot_score_in_its_json_and_notes(tmp_path):
+    """Through discover() itself: a stiff record with four contact samples has no field slope, so the
+    trial is left out of the fit; discovery.json lists it with scored false and the field fit's
+    reason, the notes count it, and the other 17 are scored."""
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.execute.executors import make_executor
+
+    d = _bundled_subset(tmp_path / "data", [1, 2], {"b1c1t3"})
+    res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+                   candidates=("modulus_scale",), out=tmp_path / "out")
+    rows = {r["trial"]: r for r in json.loads((tmp_path / "out" / "discovery.json").read_text())["trials"]}
+    assert len(rows) == 18 and not rows["b1c1t3"]["scored"]
+    assert rows["b1c1t3"]["not_scored"] == "no field stiffness: only 4 contact samples (< 5)"
+    assert all(r["scored"] and "not_scored" not in r for t, r in rows.items() if t != "b1c1t3")
+    assert [n for n in res.notes if "not scored" in n] == [
+        "1 of 18 trials not scored: b1c1t3 (no field stiffness: only 4 contact samples (< 5))"]
+    assert not np.isfinite(res.trials.set_index("trial").r_before["b1c1t3"])
+
+
+def test_too_few_scored_trials_stop_discovery_naming_those_left_out(tmp_path):
+    """Four of nine trials too stiff for a field slope leave five, under the six discovery needs: the
+    error names the field and every trial left out, with why, since no discovery.json follows."""
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.errors import InputError
+    from canebench.execute.executors import make_executor
+
+    stiff = {"b1c1t1", "b1c1t2", "b1c2t3", "b1c3t1"}
+    d = _bundled_subset(tmp_path / "data", [1], stiff)
+    with pytest.raises(InputError) as err:
+        discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+                 candidates=("modulus_scale",))
+    msg = str(err.value)
+    assert "only 5 usable trials on 3 canes" in msg and "4 of 9 trials not scored" in msg, msg
+    assert all(f"{t} (no field stiffness: only 4 contact samples" in msg for t in stiff), msg
+
+
+def test_the_cli_labels_an_unscored_obstruction_apart_from_an_early_contact():
+    """Both are left out of the fit; only the early contact is one (the CLI had called both so)."""
+    from canebench.cli.discover import _excluded_text
+
+    assert _excluded_text({"onset_mm": 30.0, "excluded": True, "reason": "no field stiffness: R^2 0.6"}) == \
+        " (not scored)"
+    assert _excluded_text({"onset_mm": 12.0, "contact_mm": 3.0, "excluded": True}) == " (early contact)"
+    assert _excluded_text({"onset_mm": 30.0}) == ""

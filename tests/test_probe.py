@@ -116,3 +116,84 @@ def test_real_engine_instability_is_detected(chain):
 def test_force_limit_stops_the_trial(chain):
     tr = run_probe(get_backend("pinocchio"), chain, PROTOCOLS["fast"].replace(force_limit_n=0.5), 90)
     assert tr.force[-1] >= 0.5 and all(f < 0.5 for f in tr.force[:-1])
+
+
+class Spring(StaticModel):
+    """A linear spring k (N/m) at the probe."""
+
+    def __init__(self, k):
+        self.k = k
+
+    def solve(self, d):
+        return self.k * d
+
+
+class SpringBackend(StaticBackend):
+    name, engine_module = "spring", "math"
+
+    def __init__(self, k):
+        self.k = k
+
+    def settings(self, proto):
+        return {}
+
+    def build(self, chain):
+        return Spring(self.k)
+
+
+def test_a_push_that_reaches_the_stop_in_two_steps_is_repeated_in_finer_steps(chain):
+    """10 N/mm reaches the rig's 1000 gf (9.81 N) at the second 0.5 mm step: two samples, no
+    slope. The push is repeated in steps fine enough for at least five samples before the stop,
+    as many as the field fit asks of a record, and the slope is the spring's."""
+    proto = PROTOCOLS["fast"]
+    tr = run_probe(SpringBackend(1.0e4), chain, proto, 26)
+    assert tr.status == "ok", tr.reason
+    assert tr.extras["step_mm"] < 0.5 and len(tr.force) >= 5, (tr.extras, tr.force)
+    assert tr.force[-1] >= proto.force_limit_n and all(f < proto.force_limit_n for f in tr.force[:-1])
+    assert tr.displacement[0] == pytest.approx(tr.extras["step_mm"] * 1e-3)  # the finer step from the start
+    assert tr.fit().slope == pytest.approx(1.0e4)
+    # a spring that leaves five samples before the stop is pushed in the protocol's own steps
+    soft = run_probe(SpringBackend(3.0e3), chain, proto, 26)  # 9.81 N at the 7th step
+    assert soft.extras["step_mm"] == 0.5 and len(soft.force) == 7
+    # a trace cut short by its step count (the field record's length), not by the stop, is left alone
+    short = run_probe(SpringBackend(1.0e4), chain, proto, 1)
+    assert short.extras["step_mm"] == 0.5 and len(short.force) == 1
+
+
+def test_a_dynamic_engine_stiff_enough_to_stop_early_is_repeated_too(chain):
+    """The same floor on the engine's own PID path (the toy's spring, 1000x stiffer than its
+    default): one sample of 0.5 mm reaches 50 N, past the stop, so the push is redone finer."""
+
+    class Stiff(ToyBackend):
+        def build(self, chain, proto):
+            sim = ToySim("ok")
+            sim.k = 1.5e4
+            return sim
+
+    tr = run_probe(Stiff("ok"), chain, PROTOCOLS["fast"], 20)
+    assert tr.status == "ok" and len(tr.force) >= 5 and tr.extras["step_mm"] < 0.5, (tr.reason, tr.extras)
+    assert tr.fit().slope == pytest.approx(1.5e4)
+
+
+def test_a_stiff_cane_keeps_its_slope_on_the_engines(bundled_trials):
+    """A bundled cane made 60x stiffer (about 15 N/mm as a chain) reaches the stop at the second
+    protocol step. Repeated in finer steps, the beam reference's slope is its own small-deflection
+    stiffness (to 1 %: the push to 1000 gf is under a millimetre on a cane hundreds long), and
+    MuJoCo's chain agrees with Pinocchio's exact statics of the same chain to 2 % (at the
+    protocol's own step they agree to 0.3 % in median on the bundled trials)."""
+    from canebench.model.config import ModelConfig
+
+    t = next(t for t in bundled_trials if t.id == "b1c1t3")
+    stiff = ModelConfig(modulus_pa=60 * t.cane.material.flexural_modulus)
+    ch = build_chain(t.cane, t.push_id, stiff)
+    proto = PROTOCOLS["fast"]
+    beam = run_probe(get_backend("beam"), ch, proto, 40)
+    assert beam.status == "ok" and beam.extras["step_mm"] < 0.5 and len(beam.force) >= 5, (beam.reason, beam.extras)
+    assert beam.fit().slope == pytest.approx(beam.extras["k_linear"], rel=0.01)
+    pin = run_probe(get_backend("pinocchio"), ch, proto, 40)
+    mj = run_probe(get_backend("mujoco"), ch, proto, 40)
+    assert pin.status == "ok" and pin.extras["step_mm"] < 0.5 and len(pin.force) >= 5, (pin.reason, pin.extras)
+    # the engine's PI law lags a stiff cane (its ramp error is k v / Ki), so MuJoCo's probe creeps
+    # to the stop in more than five samples at the protocol's own step: it needs no repeat
+    assert mj.status == "ok" and len(mj.force) >= 5, (mj.reason, mj.extras)
+    assert mj.fit().slope == pytest.approx(pin.fit().slope, rel=0.02)

@@ -30,6 +30,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(fn=main)
 
 
+def _excluded_text(v: dict) -> str:
+    """An obstructed trial left out of the fit: not scored (with its reason in the notes), or an
+    early contact."""
+    return " (not scored)" if "reason" in v else " (early contact)" if v.get("excluded") else ""
+
+
 def main(a: argparse.Namespace) -> int:
     if a.selftest:
         from ..discovery.selftest import run_selftest, summarize
@@ -85,8 +91,7 @@ def main(a: argparse.Namespace) -> int:
             early = n.get("n_excluded_early_contact", 0)
             print(f"  named: obstruction in {n['n_trials']} trial(s)"
                   + (f" and {early} early contact(s), left out of the fit" if early else "") + ": "
-                  + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" + (" (early contact)" if v.get("excluded") else "")
-                              for t, v in n["local"].items()))
+                  + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" + _excluded_text(v) for t, v in n["local"].items()))
         else:
             print(f"  {what}: {n['effect']} {_params_text(n)}{_rivals_text(n)}")
     for u in doc.get("unsupported", []):

@@ -336,9 +336,6 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             for k, v in onsets.items())), "per_trial"),)
     cfg_b = cfg0.replace(effects=obstruction)
     fields = field_stage(trials, proto.fit_window_mm, cfg_b)
-    # an elbow is reported wherever it is found; a trial whose trace is still no line up to it
-    # (noise, not the elbow, spoiled the fit) is not scored, and says why
-    unscored = unscored_onsets(onsets, fields)
     timing["field_s"] = time.perf_counter() - t_start - timing["geometry_s"]
 
     # -- baseline simulation through the runner
@@ -364,15 +361,19 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     sim_why = dict(zip(res.trial, res.reason.fillna("").astype(str))) if "reason" in res else {}
     feats["not_scored"] = [not_scored_reason(t, fields.get(t), early, k_base, sim_why) if not u else ""
                            for t, u in zip(feats.trial, usable)]
-    if (~usable).any():
-        left = feats[~usable]
-        notes.append(f"{len(left)} of {len(feats)} trials not scored: "
-                     + "; ".join(f"{t} ({why})" for t, why in zip(left.trial, left.not_scored)))
+    # an elbow is reported wherever it is found; an obstructed trial that is not scored (its trace is
+    # still no line up to the elbow, or the engine failed) is marked so in the obstruction's values
+    unscored = {t: why for t, why in zip(feats.trial, feats.not_scored) if why and t in onsets}
+    left = [f"{t} ({f'obstruction at {onsets[t]:.1f} mm; ' if t in onsets else ''}{why})"
+            for t, why in zip(feats.trial, feats.not_scored) if why]
+    if left:
+        notes.append(f"{len(left)} of {len(feats)} trials not scored: " + "; ".join(left))
     if usable.sum() < 6 or feats[usable].cane.nunique() < 3:
         from ..errors import InputError
 
         raise InputError("--field", "trials", f"only {int(usable.sum())} usable trials on "
-                                              f"{feats[usable].cane.nunique()} canes: discovery needs 6 on 3")
+                                              f"{feats[usable].cane.nunique()} canes: discovery needs 6 on 3"
+                         + (f"; {notes[-1]}" if left else ""))
     feats["log_k_field"] = np.log(feats.k_field)
     F = feats[usable].reset_index(drop=True)
     ss = ScreenSet.build([geoms[t] for t in F.trial])
@@ -479,12 +480,6 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         named.append({"effect": "obstruction", "scope": "per_trial", "params": {},
                       "local": dict(sorted(local.items())), "ci95": {}, "n_trials": len(onsets),
                       "n_excluded_early_contact": len(early), "n_excluded_unscored": len(unscored)})
-    if unscored:
-        notes.append(f"{len(unscored)} trial(s) with an obstruction onset left out of the fit: up to the onset the "
-                     "trace is still no line (" + "; ".join(f"{k}: {v}" for k, v in sorted(unscored.items())) + ")")
-    if early:
-        notes.append(f"{len(early)} trial(s) left out of the fit: a soft contact ramp before the field stage's "
-                     f"contact knee, which is an obstruction's onset ({', '.join(sorted(early))})")
     if recontact:
         notes.append(f"{len(recontact)} obstructed trial(s) touch earlier than the field stage's contact knee, which "
                      "an elbow inside its search pulled late: onset and field stiffness from the record up to the "
@@ -587,17 +582,6 @@ def not_scored_reason(tid: str, fr: Any, early: dict, k_base: dict[str, float], 
     if not (np.isfinite(k_b) and k_b > 0):
         return f"no baseline stiffness: {sim_why.get(tid) or 'the engine gave none'}"
     return "not scored"
-
-
-def unscored_onsets(onsets: dict[str, float], fields: dict) -> dict[str, str]:
-    """The trials of ``onsets`` whose field fit up to the onset (``fields``, refitted with the
-    obstruction) is still unusable, with the reason: they are named but not scored."""
-    out: dict[str, str] = {}
-    for tid in onsets:
-        fr = fields.get(tid)
-        if fr is None or fr.fit is None or not fr.fit.usable:
-            out[tid] = (fr.reason if fr is not None else "") or "no field fit"
-    return out
 
 
 class Recontact(NamedTuple):
@@ -735,7 +719,7 @@ def field_onsets(fields: dict) -> dict[str, float]:
     it changes no slope on either side, so it names nothing. Traces a straight line fits poorly
     are searched too: a strong elbow is what makes them so (the real b5c2t3's 27-fold one at
     37 mm leaves R^2 = 0.62). Up to its onset such a trace is scored like any other where it is
-    a line there (:func:`unscored_onsets` lists those that are not).
+    a line there (those that are not are listed as not scored).
     """
     onsets: dict[str, float] = {}
     for tid, fr in fields.items():

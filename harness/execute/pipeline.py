@@ -222,6 +222,7 @@ def run_job(job: Job) -> JobResult:
         n_links=chain.n_links, chain_hash=chain.fingerprint(), settings=json.dumps(tr.settings, sort_keys=True),
         controller=tr.extras.get("controller", ""), dt=tr.extras.get("dt", math.nan),
         answer=tr.extras.get("answer", ""),
+        step_mm=tr.extras.get("step_mm", job.protocol.step_m * 1e3),  # finer than the protocol's: see run_probe
     )
     for key in ("beam_elements", "beam_rel_error"):  # the beam reference's mesh and error estimate
         if key in tr.extras:
