@@ -2308,3 +2308,23 @@ def test_the_cli_labels_an_unscored_obstruction_apart_from_an_early_contact():
         " (not scored)"
     assert _excluded_text({"onset_mm": 12.0, "contact_mm": 3.0, "excluded": True}) == " (early contact)"
     assert _excluded_text({"onset_mm": 30.0}) == ""
+
+
+def test_a_trial_left_out_is_listed_once_an_obstructed_one_with_its_onset():
+    """One note lists every trial left out (an obstructed one with its onset, where the obstruction
+    is named); the obstructed ones among them, whatever the reason (a trace still no line up to the
+    elbow, or the engine), are the obstruction's excluded values."""
+    from canebench.discovery.workflow import not_scored_note
+
+    why = ["", "no field stiffness: R^2 0.62 < 0.8", "no baseline stiffness: diverged", "no field stiffness: x"]
+    trials = ["a", "elbow", "sim", "stiff"]
+    unscored, note = not_scored_note(trials, why, {"a": 12.0, "elbow": 30.0, "sim": 9.5})
+    assert unscored == {"elbow": why[1], "sim": why[2]}
+    assert note == ("3 of 4 trials not scored: elbow (obstruction at 30.0 mm; no field stiffness: R^2 0.62 < 0.8); "
+                    "sim (obstruction at 9.5 mm; no baseline stiffness: diverged); stiff (no field stiffness: x)")
+    assert note.count("elbow") == 1
+    # no obstruction named: no onsets in the note, none excluded from it
+    assert not_scored_note(trials, why, {}) == ({}, "3 of 4 trials not scored: elbow (no field stiffness: R^2 0.62 "
+                                                    "< 0.8); sim (no baseline stiffness: diverged); stiff (no field "
+                                                    "stiffness: x)")
+    assert not_scored_note(["a"], [""], {"a": 1.0}) == ({}, "")

@@ -152,27 +152,65 @@ def test_a_push_that_reaches_the_stop_in_two_steps_is_repeated_in_finer_steps(ch
     assert tr.force[-1] >= proto.force_limit_n and all(f < proto.force_limit_n for f in tr.force[:-1])
     assert tr.displacement[0] == pytest.approx(tr.extras["step_mm"] * 1e-3)  # the finer step from the start
     assert tr.fit().slope == pytest.approx(1.0e4)
-    # a spring that leaves five samples before the stop is pushed in the protocol's own steps
-    soft = run_probe(SpringBackend(3.0e3), chain, proto, 26)  # 9.81 N at the 7th step
-    assert soft.extras["step_mm"] == 0.5 and len(soft.force) == 7
+    # the floor is five samples, the field fit's: a stop at the fourth is repeated, at the fifth not
+    four = run_probe(SpringBackend(5.0e3), chain, proto, 26)  # 10 N at 2.0 mm, 7.5 N at 1.5 mm
+    assert four.extras["step_mm"] < 0.5 and len(four.force) >= 5, four.extras
+    five = run_probe(SpringBackend(4.0e3), chain, proto, 26)  # 10 N at 2.5 mm, 8 N at 2.0 mm
+    assert five.extras["step_mm"] == 0.5 and len(five.force) == 5
     # a trace cut short by its step count (the field record's length), not by the stop, is left alone
     short = run_probe(SpringBackend(1.0e4), chain, proto, 1)
     assert short.extras["step_mm"] == 0.5 and len(short.force) == 1
+    # and a study that compares engines sample for sample may keep the protocol's own push
+    same = run_probe(SpringBackend(1.0e4), chain, proto, 26, repeat_finer=False)
+    assert same.extras["step_mm"] == 0.5 and len(same.force) == 2
+
+
+def test_a_failed_finer_push_leaves_the_protocols_own(chain):
+    """A model that solves only on the protocol's 0.5 mm grid: its four-sample push (a slope from
+    four points, as before the repeat existed) is kept, and the failed repeat is said."""
+
+    class Picky(StaticModel):
+        def solve(self, d):
+            if abs(d / 0.5e-3 - round(d / 0.5e-3)) > 1e-6:
+                raise RuntimeError("no convergence")
+            return 5.0e3 * d
+
+    class B(SpringBackend):
+        def build(self, chain):
+            return Picky()
+
+    tr = run_probe(B(0.0), chain, PROTOCOLS["fast"], 26)
+    assert tr.status == "ok" and tr.extras["step_mm"] == 0.5 and len(tr.force) == 4
+    assert "no convergence" in tr.extras["finer_push"] and tr.fit().slope == pytest.approx(5.0e3)
+
+
+class LagSim(ToySim):
+    """A spring whose probe reaches only a fraction of its setpoint (a PI law lagging a stiff cane)."""
+
+    def __init__(self, k, frac):
+        super().__init__("ok")
+        self.k, self.frac = k, frac
+
+    def read(self):
+        return self.frac * self.sp, 0.0
 
 
 def test_a_dynamic_engine_stiff_enough_to_stop_early_is_repeated_too(chain):
-    """The same floor on the engine's own PID path (the toy's spring, 1000x stiffer than its
-    default): one sample of 0.5 mm reaches 50 N, past the stop, so the push is redone finer."""
+    """The same floor on the engine's own PID path: a 15 N/mm spring reaches 7.5 N at the first
+    0.5 mm sample and the stop at the second, so the push is redone finer; so is a 30 N/mm one
+    whose probe lags to half its setpoint (it too stops at the second sample)."""
 
     class Stiff(ToyBackend):
-        def build(self, chain, proto):
-            sim = ToySim("ok")
-            sim.k = 1.5e4
-            return sim
+        def __init__(self, k, frac):
+            self.k, self.frac = k, frac
 
-    tr = run_probe(Stiff("ok"), chain, PROTOCOLS["fast"], 20)
-    assert tr.status == "ok" and len(tr.force) >= 5 and tr.extras["step_mm"] < 0.5, (tr.reason, tr.extras)
-    assert tr.fit().slope == pytest.approx(1.5e4)
+        def build(self, chain, proto):
+            return LagSim(self.k, self.frac)
+
+    for k, frac in ((1.5e4, 1.0), (3.0e4, 0.5)):
+        tr = run_probe(Stiff(k, frac), chain, PROTOCOLS["fast"], 20)
+        assert tr.status == "ok" and len(tr.force) >= 5 and tr.extras["step_mm"] < 0.5, (k, tr.reason, tr.extras)
+        assert tr.fit().slope == pytest.approx(k)
 
 
 def test_a_stiff_cane_keeps_its_slope_on_the_engines(bundled_trials):

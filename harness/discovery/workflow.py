@@ -82,7 +82,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -363,17 +363,15 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                            for t, u in zip(feats.trial, usable)]
     # an elbow is reported wherever it is found; an obstructed trial that is not scored (its trace is
     # still no line up to the elbow, or the engine failed) is marked so in the obstruction's values
-    unscored = {t: why for t, why in zip(feats.trial, feats.not_scored) if why and t in onsets}
-    left = [f"{t} ({f'obstruction at {onsets[t]:.1f} mm; ' if t in onsets else ''}{why})"
-            for t, why in zip(feats.trial, feats.not_scored) if why]
+    unscored, left = not_scored_note(feats.trial, feats.not_scored, onsets if obstruction else {})
     if left:
-        notes.append(f"{len(left)} of {len(feats)} trials not scored: " + "; ".join(left))
+        notes.append(left)
     if usable.sum() < 6 or feats[usable].cane.nunique() < 3:
         from ..errors import InputError
 
         raise InputError("--field", "trials", f"only {int(usable.sum())} usable trials on "
                                               f"{feats[usable].cane.nunique()} canes: discovery needs 6 on 3"
-                         + (f"; {notes[-1]}" if left else ""))
+                         + (f"; {left}" if left else ""))
     feats["log_k_field"] = np.log(feats.k_field)
     F = feats[usable].reset_index(drop=True)
     ss = ScreenSet.build([geoms[t] for t in F.trial])
@@ -566,6 +564,24 @@ def mark_close_calls(named: list[dict], close_calls: list[dict]) -> list[str]:
                      + f" (under {CLOSE_BIC:g}: a Bayes factor under e, which the data barely support); read the "
                        "name with that rival beside it")
     return notes
+
+
+def not_scored_note(trials: Iterable[str], not_scored: Iterable[str],
+                    onsets: Mapping[str, float]) -> tuple[dict[str, str], str]:
+    """The trials left out of the scoring, once: ``(unscored, note)``.
+
+    ``not_scored`` holds each trial's reason (empty where it is scored) and ``onsets`` the named
+    obstruction's onsets. ``unscored`` is the obstructed trials among those left out, with their
+    reasons (the obstruction's values mark them excluded); ``note`` counts and lists every trial
+    left out, an obstructed one with its onset, or is empty when every trial is scored.
+    """
+    rows = list(zip(trials, not_scored))
+    left = [(t, why) for t, why in rows if isinstance(why, str) and why]
+    unscored = {t: why for t, why in left if t in onsets}
+    if not left:
+        return unscored, ""
+    return unscored, f"{len(left)} of {len(rows)} trials not scored: " + "; ".join(
+        f"{t} ({f'obstruction at {onsets[t]:.1f} mm; ' if t in onsets else ''}{why})" for t, why in left)
 
 
 def not_scored_reason(tid: str, fr: Any, early: dict, k_base: dict[str, float], sim_why: dict[str, str]) -> str:

@@ -210,7 +210,8 @@ def run_job(job: Job) -> JobResult:
     fit = tr.fit(win * 1e-3 if win is not None else None) if tr.status == "ok" else None
     status, reason = tr.status, tr.reason
     if status == "ok" and fit is None:
-        status, reason = "failed", "too few samples to fit a slope"
+        status, reason = "failed", "too few samples to fit a slope" + (
+            f" ({tr.extras['finer_push']})" if "finer_push" in tr.extras else "")
     k_sim = fit.slope_n_per_mm if fit is not None else math.nan
     if status == "ok" and not (k_sim > 0):
         # a cane pushed forward never pulls back: this is the simulation's fault, not the field's

@@ -187,9 +187,11 @@ MIN_SAMPLES_TO_STOP = 5
 #: Samples aimed at when a push is repeated in finer steps (a margin over the floor for the
 #: secant's error on a stiffening or lagging trace).
 TARGET_SAMPLES_TO_STOP = 8
-#: At most this many repeats, each refining the step by at most ``MAX_REFINE``: a cane that still
-#: reaches the stop within a few thousandths of a millimetre is left to the protocol's own checks.
-MAX_REPEATS, MAX_REFINE = 3, 64
+#: Finest refinement: a first sample under twice the stop (past it, :func:`_check` fails the
+#: trial as a runaway) puts the stop beyond half a step, so the secant asks for at most 16.
+MAX_REFINE = 2 * TARGET_SAMPLES_TO_STOP
+#: Repeats allowed: one suffices for a line; a trace that stiffens may need another.
+MAX_REPEATS = 3
 
 
 def _stopped_short(tr: ProbeTrace, force_limit_n: float) -> bool:
@@ -207,27 +209,31 @@ def _finer(tr: ProbeTrace, proto: Protocol) -> int:
     return int(min(MAX_REFINE, max(2, math.ceil(TARGET_SAMPLES_TO_STOP * proto.step_m / travel))))
 
 
-def run_probe(backend: Any, chain: Chain, proto: Protocol, n_steps: int) -> ProbeTrace:
+def run_probe(backend: Any, chain: Chain, proto: Protocol, n_steps: int, repeat_finer: bool = True) -> ProbeTrace:
     """Build ``chain`` in ``backend`` and probe it for ``n_steps`` samples.
 
     A model so stiff that it reaches the rig's stop within :data:`MIN_SAMPLES_TO_STOP` protocol
     steps (a root-compliant cane's rigid-clamp baseline: 10 N/mm reaches 1000 gf in two 0.5 mm
     steps) is pushed again in finer steps over the same travel, so it still has a slope; the
-    field's record cannot be repeated, but the model's can, and a residual lost there is the
-    largest one. The trace's ``extras["step_mm"]`` says which step it ran.
+    field's record cannot be repeated, but the model's can, and the residual lost otherwise is
+    its set's largest. The trace's ``extras["step_mm"]`` says which step it ran. A repeat that
+    fails leaves the protocol's own push (with ``extras["finer_push"]`` saying why), which is
+    what a trial without the repeat would have had. ``repeat_finer=False`` keeps every backend
+    on the protocol's own samples (studies that compare engines sample for sample, or time them).
     """
     tr = _probe_once(backend, chain, proto, n_steps)
     step_m, steps = proto.step_m, n_steps
-    for _ in range(MAX_REPEATS):
+    for _ in range(MAX_REPEATS if repeat_finer else 0):
         if not _stopped_short(tr, proto.force_limit_n):
             break
         n = _finer(tr, proto.replace(step_m=step_m))
-        step_m, steps = step_m / n, steps * n  # the same travel, which the stop will end sooner
-        fine = _probe_once(backend, chain, proto.replace(step_m=step_m), steps)
+        fine = _probe_once(backend, chain, proto.replace(step_m=step_m / n), steps * n)  # the same travel
         fine.wall_s += tr.wall_s
-        tr = fine
-    if step_m != proto.step_m:
-        _check_range(tr, proto)  # a push shorter than a fifth of the protocol's step is no slope
+        if fine.status != "ok":
+            tr.extras["finer_push"] = f"a push in {step_m / n * 1e3:.3g} mm steps failed: {fine.reason}"
+            tr.wall_s = fine.wall_s
+            break
+        step_m, steps, tr = step_m / n, steps * n, fine
     tr.extras["step_mm"] = step_m * 1e3
     return tr
 

@@ -40,10 +40,11 @@ def bench_protocols(trials: str = "b1c1t1,b1c2t1,b3c1t2", backends: list[str] | 
         chain = build_chain(t.cane, t.push_id, config)
         ff = field_fit_for(t)
         n = min(PROTOCOLS["paper"].max_steps, ff.n_steps if ff else 90, steps or 90)
-        k_ref = run_probe(ref, chain, PROTOCOLS["fast"], n).fit().slope
+        # timings and comparisons on the protocol's own samples: no finer repeat
+        k_ref = run_probe(ref, chain, PROTOCOLS["fast"], n, repeat_finer=False).fit().slope
         for pname in ("fast", "paper"):
             for b in backends:
-                tr = run_probe(get_backend(b), chain, PROTOCOLS[pname], n)
+                tr = run_probe(get_backend(b), chain, PROTOCOLS[pname], n, repeat_finer=False)
                 fit = tr.fit() if tr.status == "ok" else None
                 rows.append({"trial": t.id, "links": chain.n_links, "steps": n, "protocol": pname, "backend": b,
                              "k_N/mm": fit.slope * 1e-3 if fit else math.nan,
@@ -79,7 +80,7 @@ def bench_beam(trials: str = "b1c1t1,b3c1t2,b5c3t1,b6c2t3", config: ModelConfig 
     rows = []
     for t in load_dataset(bundled_dataset(), trials):
         chain = build_chain(t.cane, t.push_id, config)
-        res = {b: run_probe(get_backend(b), chain, proto, 90) for b in ("beam", "pinocchio")}
+        res = {b: run_probe(get_backend(b), chain, proto, 90, repeat_finer=False) for b in ("beam", "pinocchio")}
         row = {"trial": t.id, "steps": len(res["beam"].force), "status": res["beam"].status,
                "beam_s": res["beam"].wall_s, "pinocchio_s": res["pinocchio"].wall_s,
                "beam/pinocchio": res["beam"].wall_s / res["pinocchio"].wall_s,
@@ -369,7 +370,7 @@ def _paper_estimate(mj_jobs: list, pairs: list, fields: dict, paper_runs: int, p
     for job, cpu_fast, n_fast, links in pick:
         chain = build_chain(job.trial.cane, job.trial.push_id, job.config)
         c0 = time.process_time()
-        tr = run_probe(backend, chain, proto, paper_steps)
+        tr = run_probe(backend, chain, proto, paper_steps, repeat_finer=False)
         per_step = (time.process_time() - c0) / max(len(tr.force), 1)
         est = per_step * max(n_fast, 1)
         rows.append({"trial": job.trial.id, "links": links, "fast_cpu_s": cpu_fast, "setpoints": n_fast,

@@ -246,13 +246,14 @@ def continuum_convergence(cases: list[tuple[str, CaneDescription, str]], element
     rows = []
     for i, (tid, cane, pid) in enumerate(cases):
         chain = build_chain(cane, pid, base)
-        tb = run_probe(BeamBackend(), chain, proto, n_steps)
+        # one protocol and the same samples for the beam and every engine (no finer repeat)
+        tb = run_probe(BeamBackend(), chain, proto, n_steps, repeat_finer=False)
         fb = tb.fit()
         k_beam = fb.slope if (fb is not None and tb.status == "ok") else np.nan  # N/m (SI trace)
         k_closed = cantilever_stiffness(tid.startswith("tapered")) if tid in CANTILEVERS else np.nan
         case_rows = []
         for backend, variant, n, make in variants:
-            tr = run_probe(make(), chain, proto, n_steps)
+            tr = run_probe(make(), chain, proto, n_steps, repeat_finer=False)
             f = tr.fit()
             k = f.slope if (f is not None and tr.status == "ok") else np.nan
             case_rows.append({"trial": tid, "backend": backend, "variant": variant, "elements": n, "k": k,
