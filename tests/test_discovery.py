@@ -2242,21 +2242,15 @@ def _stiff_rig_csv(path, height_mm):
                   "Height (mm)": height_mm}).to_csv(path, index=False)
 
 
-def _bundled_subset(dst, bushes, stiff):
-    """The bundled dataset's ``bushes`` copied to ``dst``, with the trials in ``stiff`` replaced by
-    :func:`_stiff_rig_csv` records."""
+def _bundled_with_stiff(dst, stiff):
+    """The bundled dataset copied to ``dst``, with the trials in ``stiff`` replaced by
+    :func:`_stiff_rig_csv` records (``load_dataset``'s selection takes the bushes wanted)."""
     import shutil
 
     from canebench.data.dataset import bundled_dataset
 
     shutil.copytree(bundled_dataset(), dst)
-    pp = pd.read_csv(dst / "push_points.csv")
-    pp = pp[pp.bush.isin(bushes)]
-    pp.to_csv(dst / "push_points.csv", index=False)
-    for y in (dst / "canes").glob("*.yaml"):
-        if int(y.stem[1:].split("c")[0]) not in bushes:
-            y.unlink()
-    for r in pp.itertuples():
+    for r in pd.read_csv(dst / "push_points.csv").itertuples():
         if f"b{r.bush}c{r.cane}t{r.trial}" in stiff:
             _stiff_rig_csv(dst / r.file, r.height_mm)
     return dst
@@ -2270,8 +2264,8 @@ def test_discover_lists_a_trial_it_cannot_score_in_its_json_and_notes(tmp_path):
     from canebench.discovery.workflow import discover
     from canebench.execute.executors import make_executor
 
-    d = _bundled_subset(tmp_path / "data", [1, 2], {"b1c1t3"})
-    res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+    d = _bundled_with_stiff(tmp_path / "data", {"b1c1t3"})
+    res = discover(load_dataset(d, "b1*,b2*"), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
                    candidates=("modulus_scale",), out=tmp_path / "out")
     rows = {r["trial"]: r for r in json.loads((tmp_path / "out" / "discovery.json").read_text())["trials"]}
     assert len(rows) == 18 and not rows["b1c1t3"]["scored"]
@@ -2291,9 +2285,9 @@ def test_too_few_scored_trials_stop_discovery_naming_those_left_out(tmp_path):
     from canebench.execute.executors import make_executor
 
     stiff = {"b1c1t1", "b1c1t2", "b1c2t3", "b1c3t1"}
-    d = _bundled_subset(tmp_path / "data", [1], stiff)
+    d = _bundled_with_stiff(tmp_path / "data", stiff)
     with pytest.raises(InputError) as err:
-        discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+        discover(load_dataset(d, "b1*"), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
                  candidates=("modulus_scale",))
     msg = str(err.value)
     assert "only 5 usable trials on 3 canes" in msg and "4 of 9 trials not scored" in msg, msg
