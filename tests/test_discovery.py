@@ -2206,10 +2206,8 @@ def test_a_trial_left_out_of_the_scoring_says_why_in_the_json():
     from canebench.discovery.workflow import DiscoveryResult, not_scored_reason
     from canebench.measure.field import MIN_CONTACT_SAMPLES, extract_field_stiffness
 
-    rng = np.random.default_rng(5)
-    x = np.arange(0.0, 10.0, 0.5)
-    f = -27.0 + rng.normal(0, 3.0, len(x))
-    f[16:] += 100.0 + 300.0 * np.arange(len(x) - 16)  # 100, 400, 700, 1000 gf above the tare
+    f = _stiff_force()
+    x = 0.5 * np.arange(len(f))
     ff = extract_field_stiffness(RigTrial("stiff.csv", x, f, 0.5 * np.arange(len(x)), 560.0), n_boot=20)
     assert not ff.usable and ff.fault == "contact_samples" and ff.n_contact < MIN_CONTACT_SAMPLES, ff.reason
     fr = SimpleNamespace(fit=ff, reason="", k=ff.k_n_per_mm)
@@ -2218,6 +2216,9 @@ def test_a_trial_left_out_of_the_scoring_says_why_in_the_json():
     good = SimpleNamespace(fit=None, reason="", k=0.3)
     assert not_scored_reason("sim", good, {}, {"sim": math.nan}, {"sim": "diverged: |v| > 10 m/s"}) == \
         "no baseline stiffness: diverged: |v| > 10 m/s"
+    assert not_scored_reason("sim", good, {}, {"sim": -0.1}, {}) == "no baseline stiffness: the engine gave none"
+    # the reason is discovery's one test of a scored trial: empty only for a positive field and baseline
+    assert not_scored_reason("ok", good, {}, {"ok": 0.2}, {}) == ""
     trials = pd.DataFrame({"trial": ["a", "stiff", "sim"], "cane": ["c1", "c1", "c1"],
                            "obstruction_onset_mm": [math.nan] * 3, "early_contact_mm": [math.nan] * 3,
                            "r_before": [0.1, math.nan, math.nan], "r_after_cv": [0.05, math.nan, math.nan],
@@ -2230,13 +2231,19 @@ def test_a_trial_left_out_of_the_scoring_says_why_in_the_json():
     assert not rows["sim"]["scored"] and rows["sim"]["not_scored"].startswith("no baseline stiffness")
 
 
+def _stiff_force(n=20):
+    """Load cell readings (gf) of a cane held so stiffly that the rig reaches its 1000 gf stop four
+    samples after contact (an independent generator's cane braced by a neighbour): a -27 gf tare
+    with 3 gf noise, then 100, 400, 700, 1000 gf above it."""
+    f = -27.0 + np.random.default_rng(5).normal(0, 3.0, n)
+    f[n - 4:] += 100.0 + 300.0 * np.arange(4)
+    return f
+
+
 def _stiff_rig_csv(path, height_mm):
-    """A rig file (the field format) of a cane held so stiffly that the rig reaches its 1000 gf stop
-    four samples after contact (an independent generator's cane braced by a neighbour)."""
-    rng = np.random.default_rng(5)
-    n = 20
-    f = -27.0 + rng.normal(0, 3.0, n)
-    f[16:] += 100.0 + 300.0 * np.arange(n - 16)
+    """A rig file (the field format) holding :func:`_stiff_force`'s record at 0.5 mm steps."""
+    f = _stiff_force()
+    n = len(f)
     pd.DataFrame({"Iteration": np.arange(2, n + 2, dtype=float), "Time Stamp": 31907.0 + 500.0 * np.arange(n),
                   "Load Cell Reading (gf)": f.round(2), "Displacement (mm)": 117.0 + 0.5 * np.arange(n),
                   "Height (mm)": height_mm}).to_csv(path, index=False)

@@ -354,13 +354,12 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     feats["early_contact_mm"] = [early[t].contact_mm if t in early else math.nan for t in feats.trial]
     feats["k_base"] = [k_base.get(t, math.nan) for t in feats.trial]
     feats["k_field"] = [fields[t].k for t in feats.trial]
-    usable = (np.isfinite(feats.k_base) & np.isfinite(feats.k_field) & (feats.k_base > 0) & (feats.k_field > 0)
-              & ~feats.trial.isin(list(early)))
     # a trial left out of the scoring says why, in the table, the JSON and the notes: a trace too
-    # short to fit (a very stiff cane that reaches the rig's stop in a few steps) must not vanish
+    # short to fit (a very stiff cane that reaches the rig's stop in a few steps) must not vanish.
+    # The reason is the one test of whether a trial is scored, so the two cannot disagree.
     sim_why = dict(zip(res.trial, res.reason.fillna("").astype(str))) if "reason" in res else {}
-    feats["not_scored"] = [not_scored_reason(t, fields.get(t), early, k_base, sim_why) if not u else ""
-                           for t, u in zip(feats.trial, usable)]
+    feats["not_scored"] = [not_scored_reason(t, fields.get(t), early, k_base, sim_why) for t in feats.trial]
+    usable = feats.not_scored == ""
     # an elbow is reported wherever it is found; an obstructed trial that is not scored (its trace is
     # still no line up to the elbow, or the engine failed) is marked so in the obstruction's values
     unscored, left = not_scored_note(feats.trial, feats.not_scored, onsets if obstruction else {})
@@ -586,7 +585,8 @@ def not_scored_note(trials: Iterable[str], not_scored: Iterable[str],
 
 def not_scored_reason(tid: str, fr: Any, early: dict, k_base: dict[str, float], sim_why: dict[str, str]) -> str:
     """Why trial ``tid`` has no residual: a contact before the field stage's knee, no usable field
-    slope (the field fit's own reason), or no baseline stiffness (the engine's reason)."""
+    slope (the field fit's own reason), or no baseline stiffness (the engine's reason); ``""`` when
+    it has one (a positive, finite field and baseline stiffness and no early contact)."""
     if tid in early:
         return (f"a soft contact from {early[tid].contact_mm:.1f} mm of travel and a second body "
                 f"{early[tid].onset_mm:.1f} mm after it: the trace's slope is the second body's")
@@ -597,7 +597,7 @@ def not_scored_reason(tid: str, fr: Any, early: dict, k_base: dict[str, float], 
     k_b = k_base.get(tid, math.nan)
     if not (np.isfinite(k_b) and k_b > 0):
         return f"no baseline stiffness: {sim_why.get(tid) or 'the engine gave none'}"
-    return "not scored"
+    return ""
 
 
 class Recontact(NamedTuple):
