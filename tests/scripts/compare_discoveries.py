@@ -3,32 +3,83 @@ change that must not alter behaviour.
 
 Run: ``python tests/scripts/compare_discoveries.py BEFORE AFTER NAME [NAME ...]``, where
 ``BEFORE/NAME`` and ``AFTER/NAME`` are ``--out`` folders. Per name it says whether
-``discovery.json`` (without ``timing_s`` and ``provenance``) is identical, or which keys differ;
-whether each CSV (``discovery``, ``_steps``, ``_structure``, ``_engines``) is equal; and whether
-``model.yaml`` is, apart from the lines that record when and by which commit it was written.
+``discovery.json`` (without ``timing_s`` and ``provenance``) is identical, and otherwise which
+values differ (by path, e.g. ``trials[3].obstruction_onset_mm``) apart from which keys one side
+has and the other lacks (an output written by older code lacks a key added since: that is reported
+as added, not as a difference); whether each CSV (``discovery``, ``_steps``, ``_structure``,
+``_engines``) is equal on the columns both have (columns on one side only are listed); and
+whether ``model.yaml`` is, apart from the lines that record when and by which commit it was
+written.
 """
 import json
+import math
 import sys
 from pathlib import Path
 
 import pandas as pd
 
-before, after = Path(sys.argv[1]), Path(sys.argv[2])
-for name in sys.argv[3:]:
-    docs = []
-    for root in (before, after):
-        d = json.loads((root / name / "discovery.json").read_text())
-        d.pop("timing_s", None)
-        d.pop("provenance", None)
-        docs.append(d)
-    differ = [k for k in docs[0] if docs[0].get(k) != docs[1].get(k)]
-    csvs = []
-    for f in ("discovery.csv", "discovery_steps.csv", "discovery_structure.csv", "discovery_engines.csv"):
-        pb, pa = before / name / f, after / name / f
-        if pb.exists() or pa.exists():
-            csvs.append((f, pb.exists() and pa.exists() and pd.read_csv(pb).equals(pd.read_csv(pa))))
-    stamp = ("created", "git_commit", "canebench:")
-    models = [[ln for ln in (root / name / "model.yaml").read_text().splitlines() if not any(k in ln for k in stamp)]
-              for root in (before, after)]
-    print(name, "json identical" if not differ else f"json DIFFERS in {differ}", csvs,
-          "model.yaml same" if models[0] == models[1] else "model.yaml DIFFERS")
+
+def json_diff(a, b, path=""):
+    """Paths whose values differ, and paths present on one side only, as (changed, only_before, only_after)."""
+    changed, only_b, only_a = [], [], []
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in a.keys() | b.keys():
+            p = f"{path}.{k}" if path else str(k)
+            if k not in b:
+                only_b.append(p)
+            elif k not in a:
+                only_a.append(p)
+            else:
+                c, ob, oa = json_diff(a[k], b[k], p)
+                changed += c
+                only_b += ob
+                only_a += oa
+    elif isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        for i, (x, y) in enumerate(zip(a, b)):
+            c, ob, oa = json_diff(x, y, f"{path}[{i}]")
+            changed += c
+            only_b += ob
+            only_a += oa
+    elif a != b and not (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)):
+        changed.append(path or "(top)")
+    return changed, only_b, only_a
+
+
+def csv_diff(pb, pa):
+    """'equal', 'DIFFERS' (on the common columns) or 'missing', and the columns on one side only."""
+    if not (pb.exists() and pa.exists()):
+        return "missing on one side", []
+    db, da = pd.read_csv(pb), pd.read_csv(pa)
+    common = [c for c in db.columns if c in da.columns]
+    extra = [f"-{c}" for c in db.columns if c not in da.columns] + [f"+{c}" for c in da.columns if c not in db.columns]
+    same = len(db) == len(da) and db[common].equals(da[common])
+    return ("equal" if same else "DIFFERS"), extra
+
+
+def _short(paths, n=6):
+    return ", ".join(sorted(paths)[:n]) + (f" (+{len(paths) - n} more)" if len(paths) > n else "")
+
+
+if __name__ == "__main__":
+    before, after = Path(sys.argv[1]), Path(sys.argv[2])
+    for name in sys.argv[3:]:
+        docs = []
+        for root in (before, after):
+            d = json.loads((root / name / "discovery.json").read_text())
+            d.pop("timing_s", None)
+            d.pop("provenance", None)
+            docs.append(d)
+        changed, only_b, only_a = json_diff(*docs)
+        text = "json identical" if not changed else f"json DIFFERS at {_short(changed)}"
+        if only_b or only_a:
+            text += f" (keys only before: {_short(only_b) or '-'}; only after: {_short(only_a) or '-'})"
+        csvs = []
+        for f in ("discovery.csv", "discovery_steps.csv", "discovery_structure.csv", "discovery_engines.csv"):
+            pb, pa = before / name / f, after / name / f
+            if pb.exists() or pa.exists():
+                verdict, extra = csv_diff(pb, pa)
+                csvs.append(f"{f} {verdict}" + (f" [{' '.join(extra)}]" if extra else ""))
+        stamp = ("created", "git_commit", "canebench:")
+        models = [[ln for ln in (root / name / "model.yaml").read_text().splitlines()
+                   if not any(k in ln for k in stamp)] for root in (before, after)]
+        print(name, "; ".join([text, *csvs, "model.yaml same" if models[0] == models[1] else "model.yaml DIFFERS"]))
