@@ -2207,8 +2207,8 @@ def test_a_trial_left_out_of_the_scoring_says_why_in_the_json():
     from canebench.measure.field import MIN_CONTACT_SAMPLES, extract_field_stiffness
 
     f = _stiff_force()
-    x = 0.5 * np.arange(len(f))
-    ff = extract_field_stiffness(RigTrial("stiff.csv", x, f, 0.5 * np.arange(len(x)), 560.0), n_boot=20)
+    x = 0.5 * np.arange(len(f))  # 0.5 mm steps, one every 0.5 s
+    ff = extract_field_stiffness(RigTrial("stiff.csv", x, f, x, 560.0), n_boot=20)
     assert not ff.usable and ff.fault == "contact_samples" and ff.n_contact < MIN_CONTACT_SAMPLES, ff.reason
     fr = SimpleNamespace(fit=ff, reason="", k=ff.k_n_per_mm)
     why = not_scored_reason("stiff", fr, {}, {"stiff": 0.2}, {})

@@ -20,29 +20,20 @@ import pandas as pd
 
 
 def json_diff(a, b, path=""):
-    """Paths whose values differ, and paths present on one side only, as (changed, only_before, only_after)."""
-    changed, only_b, only_a = [], [], []
+    """Walk two JSON values together, yielding ``("changed" | "before" | "after", path)``: a value
+    that differs, or a key present only before or only after."""
     if isinstance(a, dict) and isinstance(b, dict):
         for k in a.keys() | b.keys():
             p = f"{path}.{k}" if path else str(k)
-            if k not in b:
-                only_b.append(p)
-            elif k not in a:
-                only_a.append(p)
+            if k in a and k in b:
+                yield from json_diff(a[k], b[k], p)
             else:
-                c, ob, oa = json_diff(a[k], b[k], p)
-                changed += c
-                only_b += ob
-                only_a += oa
+                yield ("before" if k in a else "after"), p
     elif isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
         for i, (x, y) in enumerate(zip(a, b)):
-            c, ob, oa = json_diff(x, y, f"{path}[{i}]")
-            changed += c
-            only_b += ob
-            only_a += oa
+            yield from json_diff(x, y, f"{path}[{i}]")
     elif a != b and not (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)):
-        changed.append(path or "(top)")
-    return changed, only_b, only_a
+        yield "changed", path or "(top)"
 
 
 def csv_diff(pb, pa):
@@ -69,7 +60,8 @@ if __name__ == "__main__":
             d.pop("timing_s", None)
             d.pop("provenance", None)
             docs.append(d)
-        changed, only_b, only_a = json_diff(*docs)
+        found = list(json_diff(*docs))
+        changed, only_b, only_a = ([p for k, p in found if k == kind] for kind in ("changed", "before", "after"))
         text = "json identical" if not changed else f"json DIFFERS at {_short(changed)}"
         if only_b or only_a:
             text += f" (keys only before: {_short(only_b) or '-'}; only after: {_short(only_a) or '-'})"
