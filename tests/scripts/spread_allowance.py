@@ -26,6 +26,7 @@ import json
 import os
 import sys
 
+from canebench.discovery.adequacy import within_dispersion
 from canebench.discovery.verdict import WITHIN_EXCESS, WITHIN_FLOOR
 
 FACTORS = (4.0, 5.0, 6.0, 7.0, WITHIN_EXCESS)
@@ -52,15 +53,14 @@ def load(roots: list[str]) -> list[dict]:
                          "failed": list(a.get("failed", [])), "named": named,
                          "unexplained": bool(d.get("unexplained")),
                          "partial": [n["effect"] for n in d.get("partial", [])],
-                         "kind": st["kind"] if st else None, "hidden": st["hidden"] if st else None,
+                         "hidden": st["hidden"] if st else None,
                          "correct": bool(st["correct"]) if st else None})
     return sets
 
 
 def fails(s: dict, factor: float, floor: float) -> bool:
-    """As ``adequacy.within_dispersion``: beyond both the factor and the floor."""
-    gsd = s["geometry_sd"]
-    return gsd > 0 and s["sd"] / gsd > factor and s["sd"] >= floor
+    """The workflow's own rule (``adequacy.within_dispersion``) at another allowance."""
+    return within_dispersion(s, factor, floor)["fails"]
 
 
 def mark(s: dict) -> str:
@@ -71,14 +71,14 @@ def mark(s: dict) -> str:
 
 def main() -> None:
     sets = load(sys.argv[1:])
-    # the rule restated here must reproduce the stored verdicts at the allowance they were made with
+    # the rule must reproduce the stored verdicts at the allowance they were made with
     for s in sets:
         if fails(s, WITHIN_EXCESS, WITHIN_FLOOR) != s["stored_fails"]:
             sys.exit(f"{s['set']}: the stored within_dispersion.fails ({s['stored_fails']}) is not what the rule here "
                      f"gives at factor {WITHIN_EXCESS:g}, floor {WITHIN_FLOOR:g}: made with another allowance?")
     print(f"{'set':46s} {'hidden':36s} {'named (global)':40s} {'ok':5s} {'sd':>6s} {'geom':>7s} {'ratio':>6s}  failed")
     for s in sets:
-        ratio = s["sd"] / s["geometry_sd"] if s["geometry_sd"] > 0 else float("nan")
+        ratio = within_dispersion(s, WITHIN_EXCESS, WITHIN_FLOOR)["ratio"]
         named = "+".join(s["named"]) or ("(" + "+".join(s["partial"]) + " partial)" if s["partial"] else "-")
         print(f"{s['set']:46s} {s['hidden'] or '?':36s} {named:40s} {str(s['correct']):5s} {s['sd']:6.3f} "
               f"{s['geometry_sd']:7.4f} {ratio:6.2f}  {','.join(s['failed']) or '-'}")
