@@ -263,7 +263,7 @@ def test_an_elbow_inside_the_knee_search_does_not_pull_the_contact_late(tmp_path
     before it is an early contact there."""
     from types import SimpleNamespace
 
-    from canebench.discovery.workflow import contacts_before_elbows, early_contacts, field_onsets
+    from canebench.discovery.contacts import contacts_before_elbows, early_contacts, field_onsets
     from canebench.execute.pipeline import FieldResult, field_fit_for
     from canebench.measure.field import extract_field_stiffness
     from canebench.model.config import ModelConfig
@@ -325,7 +325,7 @@ def test_a_load_cell_drifting_before_contact_is_not_a_contact_before_an_obstruct
     from types import SimpleNamespace
 
     from canebench.discovery.onsets import detect_early_contact, ramp_is_the_cane
-    from canebench.discovery.workflow import _ramps_that_are_the_cane
+    from canebench.discovery.contacts import split_early_contacts
     from canebench.measure.field import extract_field_stiffness
 
     rng = np.random.default_rng(11)
@@ -350,21 +350,21 @@ def test_a_load_cell_drifting_before_contact_is_not_a_contact_before_an_obstruct
     k_cane = {"c0": 3.0, "c1": 0.5, "c2": 3.0, "c3": 3.0}  # gf/mm; c1 is the soft cane; the model is right
     geoms = {t.id: SimpleNamespace(compliance=lambda k=k_cane[t.cane.id]: (1e-3 / (k * gf), 0.0)) for t in trials}
     fields = {t.id: SimpleNamespace(k=k_cane[t.cane.id] * gf) for t in trials}
-    kept, drifts = _ramps_that_are_the_cane({"c0t0": e, "c1t0": e_soft}, trials, geoms, fields, {})
+    kept, drifts = split_early_contacts({"c0t0": e, "c1t0": e_soft}, trials, geoms, fields, {})
     assert set(drifts) == {"c0t0"} and set(kept) == {"c1t0"}
     fields["c1t1"] = fields["c1t2"] = SimpleNamespace(k=8 * 0.5 * gf)  # the soft cane's other pushes: elbows missed
-    kept, drifts = _ramps_that_are_the_cane({"c1t0": e_soft}, trials, geoms, fields, {})
+    kept, drifts = split_early_contacts({"c1t0": e_soft}, trials, geoms, fields, {})
     assert set(kept) == {"c1t0"}  # the data's level still places the cane at the ramp
-    kept, drifts = _ramps_that_are_the_cane({"c0t0": e}, trials, geoms, {}, {})
+    kept, drifts = split_early_contacts({"c0t0": e}, trials, geoms, {}, {})
     assert set(kept) == {"c0t0"}  # no level at all: as before
     # pushes with an onset of their own give no level: c0's other two pushes read 8x below the
     # model (as a cane's own level that would keep its ramp); with onsets there, only the data's
     # level is left, and it calls the ramp a drift
     fields = {t.id: SimpleNamespace(k=k_cane[t.cane.id] * gf) for t in trials}
     fields["c0t1"] = fields["c0t2"] = SimpleNamespace(k=3.0 / 8 * gf)
-    kept, drifts = _ramps_that_are_the_cane({"c0t0": e}, trials, geoms, fields, {})
+    kept, drifts = split_early_contacts({"c0t0": e}, trials, geoms, fields, {})
     assert set(kept) == {"c0t0"}
-    kept, drifts = _ramps_that_are_the_cane({"c0t0": e}, trials, geoms, fields, {"c0t1": 10.0, "c0t2": 12.0})
+    kept, drifts = split_early_contacts({"c0t0": e}, trials, geoms, fields, {"c0t1": 10.0, "c0t2": 12.0})
     assert set(drifts) == {"c0t0"}
 
 
@@ -435,7 +435,7 @@ def test_onset_on_the_real_elbow(field_dir):
     from canebench.discovery.onsets import detect_onset
     from canebench.execute.pipeline import field_stage
 
-    from canebench.discovery.workflow import field_onsets
+    from canebench.discovery.contacts import field_onsets
     from canebench.model.config import ModelConfig
     from canebench.model.effects import EffectSpec
 
@@ -2143,7 +2143,8 @@ def test_an_elbow_that_spoils_the_line_is_found_and_scored_up_to_it():
     from types import SimpleNamespace
 
     from canebench.data.rig import RigTrial
-    from canebench.discovery.workflow import field_onsets, not_scored_reason
+    from canebench.discovery.contacts import field_onsets
+    from canebench.discovery.workflow import not_scored_reason
     from canebench.measure.field import extract_field_stiffness
     from canebench.units import GF_TO_N
 

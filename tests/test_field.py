@@ -258,7 +258,7 @@ def test_a_trace_longer_than_the_simulated_push_is_scored_over_the_push(tmp_path
     # the elbow at 45 mm changes no scored slope, so discovery must not name an obstruction there
     # (on the whole trace the onset detector finds it, signal to noise 93)
     from canebench.discovery.onsets import detect_onset
-    from canebench.discovery.workflow import field_onsets
+    from canebench.discovery.contacts import field_onsets
 
     assert detect_onset(fr.fit.displacement_mm, fr.fit.force_n) is not None
     assert field_onsets({long[0].id: fr}) == {}

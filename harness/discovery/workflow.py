@@ -72,7 +72,7 @@
    baseline and the chosen backends re-run with it; before and after, out of
    sample.
 
-Where each stage lives: step 4 in :mod:`.selection` (with the no-effect values in
+Where each stage lives: step 2 in :mod:`.contacts`, step 4 in :mod:`.selection` (with the no-effect values in
 :mod:`.nulls`), step 5 in :mod:`.verdict`, every engine run after the baseline's in
 :mod:`.engine_runs`; this module wires them together and writes the outputs.
 """
@@ -85,28 +85,23 @@ import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from ..data.dataset import Trial
-from ..data.rig import read_rig_csv
-from ..execute.pipeline import SIM_TRAVEL_MM, field_stage
 from ..execute.runner import run_trials
-from ..measure.field import FieldFit, contact_samples, extract_field_stiffness
 from ..measure.fit import halves_slope_ratio
 from ..model.config import ModelConfig
 from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
 from ..model.presets import PRESETS
 from ..probe.protocol import PROTOCOLS
-from ..units import GF_TO_N
 from . import engine_runs
 from .checks_text import lookalike_notes
+from .contacts import FieldContacts, read_contacts
 from .fit import bootstrap_ci
 from .nulls import ci_of
-from .onsets import EarlyContact, Onset, detect_early_contact, detect_onset, ramp_is_the_cane
-from .screen import trial_geometry
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, drop_unsupported, forward_select
 from .structure import between_share
@@ -119,7 +114,6 @@ BASELINES = {
 }
 #: effects screened by default (obstruction is handled per trial from the traces)
 SCREENED = ("modulus_scale", "root_compliance", "rig_compliance", "base_flare", "probe_misalignment")
-MIN_OBSTRUCTED = 1  # trials with a detected onset needed to name the obstruction
 
 
 @dataclass
@@ -310,32 +304,11 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     notes: list[str] = [f"backend {b} skipped: {why}" for b, why in skipped.items()]
     timing: dict[str, float] = {}
 
-    # -- field, obstruction onsets
-    fields0 = field_stage(trials, proto.fit_window_mm)
-    onsets = field_onsets(fields0)
-    # a knee pulled late by an elbow inside its search: onset and field fit from the record up to
-    # the elbow (the ramp before that knee is the cane's own, not an early contact)
-    recontact = contacts_before_elbows(onsets, fields0)
-    # a soft contact the field stage took for the tare: its knee is the obstruction's onset, and
-    # its stiffness the obstruction's; such trials cannot be scored and are left out of the fit
-    early = early_contacts(fields0, knees={k: rc.fit.onset_mm for k, rc in recontact.items()})
-    t_g = time.perf_counter()  # the screen's geometry, needed here to tell a drift from a contact
-    geoms = {t.id: trial_geometry(t, cfg0) for t in trials}
-    timing["geometry_s"] = time.perf_counter() - t_g
-    early, drifts = _ramps_that_are_the_cane(early, trials, geoms, fields0, onsets)
-    for tid in early:
-        onsets.pop(tid, None)
-        recontact.pop(tid, None)
-    for tid, rc in recontact.items():
-        onsets[tid] = rc.onset_mm
-    obstruction = ()
-    if len(onsets) >= MIN_OBSTRUCTED:
-        # a moved contact's trial carries the record's cut, so every field stage reads it alike
-        obstruction = (EffectSpec("obstruction", (), tuple(sorted(
-            (k, (("onset_mm", v),) + ((("record_end_mm", recontact[k].record_end_mm),) if k in recontact else ()))
-            for k, v in onsets.items())), "per_trial"),)
+    # -- field, obstruction onsets (no simulation)
+    fc = read_contacts(trials, proto.fit_window_mm, cfg0)
+    obstruction = fc.obstruction
     cfg_b = cfg0.replace(effects=obstruction)
-    fields = field_stage(trials, proto.fit_window_mm, cfg_b)
+    timing["geometry_s"] = fc.geometry_s
     timing["field_s"] = time.perf_counter() - t_start - timing["geometry_s"]
 
     # -- baseline simulation through the runner
@@ -348,21 +321,12 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
 
     # -- screening features (the geometry was built with the field stage)
     t2 = time.perf_counter()
-    feats = _features(trials, geoms, fields)
-    feats["obstruction_onset_mm"] = [onsets[t] if t in onsets else early[t].onset_mm if t in early else math.nan
-                                     for t in feats.trial]
-    feats["early_contact_mm"] = [early[t].contact_mm if t in early else math.nan for t in feats.trial]
-    feats["k_base"] = [k_base.get(t, math.nan) for t in feats.trial]
-    feats["k_field"] = [fields[t].k for t in feats.trial]
-    # a trial left out of the scoring says why, in the table, the JSON and the notes: a trace too
-    # short to fit (a very stiff cane that reaches the rig's stop in a few steps) must not vanish.
-    # The reason is the one test of whether a trial is scored, so the two cannot disagree.
     sim_why = dict(zip(res.trial, res.reason.fillna("").astype(str))) if "reason" in res else {}
-    feats["not_scored"] = [not_scored_reason(t, fields.get(t), early, k_base, sim_why) for t in feats.trial]
+    feats = _trial_table(trials, fc, k_base, sim_why)
     usable = feats.not_scored == ""
     # an elbow is reported wherever it is found; an obstructed trial that is not scored (its trace is
     # still no line up to the elbow, or the engine failed) is marked so in the obstruction's values
-    unscored, left = not_scored_note(feats.trial, feats.not_scored, onsets if obstruction else {})
+    unscored, left = not_scored_note(feats.trial, feats.not_scored, fc.onsets if obstruction else {})
     if left:
         notes.append(left)
     if usable.sum() < 6 or feats[usable].cane.nunique() < 3:
@@ -373,7 +337,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
                          + (f"; {left}" if left else ""))
     feats["log_k_field"] = np.log(feats.k_field)
     F = feats[usable].reset_index(drop=True)
-    ss = ScreenSet.build([geoms[t] for t in F.trial])
+    ss = ScreenSet.build([fc.geoms[t] for t in F.trial])
     lkf = np.log(F.k_field.to_numpy(float))
     lkb0 = np.log(F.k_base.to_numpy(float))
     timing["screen_build_s"] = time.perf_counter() - t2
@@ -415,29 +379,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     ci = draw_ci(cv_cur.fit, at) if current else {}
     current, cv_cur, at, ci, unsupported, stale = drop_unsupported(
         current, tuple(sel.entered), cv_cur, at, lkf, ci, draw_ci, reanchor, at_empty, min_change, steps)
-    for u in unsupported:
-        beside = f", beside {u['dropped_with']}, which it entered the model with as a pair" if "dropped_with" in u else ""
-        if u["covers_null"]:
-            notes.append(f"{u['effect']} passed the selection ("
-                         + ", ".join(f"{k} = {v:.4g}" for k, v in u["params"].items()) + f") but is not named{beside}: its "
-                         + "; ".join(f"95 % interval of {k}, [{u['ci95'][k][0]:.4g}, {u['ci95'][k][1]:.4g}], reaches "
-                                     f"its no-effect value" for k in u["covers_null"])
-                         + ("; the rest refitted without it" if current else "; nothing else is in the model")
-                         + ", and the result flagged unexplained: the residuals leaned its way significantly, and "
-                           "nothing named takes that")
-        else:
-            notes.append(f"{u['effect']} is not named{beside}: it failed the selection alone, and the pair no "
-                         f"longer stands")
-    if stale:
-        notes.append(f"dropped as stale once an effect was not named: {', '.join(stale)}")
-    if sel.too_small:
-        ts = sel.too_small
-        notes.append(f"{ts['effect']} (" + ", ".join(f"{k} = {v:.4g}" for k, v in ts["params"].items())
-                     + f") fitted the residual best at step {ts['step']} (BIC {ts['bic']:.1f}; the residuals lean "
-                     f"its way, p = {ts['p']:.2g}) but changes the model by {ts['net_change_mean_abs']:.3g} in mean "
-                     f"|ln k|, under {min_change:.3g}: too small to name; {', '.join(ts['outranked'])} passed every "
-                     f"rule but {'fits' if len(ts['outranked']) == 1 else 'fit'} worse, and nothing is named in its "
-                     f"place; the result is flagged unexplained")
+    notes.extend(_not_named_notes(unsupported, stale, sel.too_small, bool(current), min_change))
     if unsupported:
         stop += "; not named, for an interval that reaches no effect: " + ", ".join(
             u["effect"] + ("" if u["covers_null"] else f" (with {u['dropped_with']})") for u in unsupported)
@@ -456,37 +398,11 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     feats = feats.merge(F[["trial", "r_before", "r_after_cv", "r_after_in", "log_k_model", "log_k_model_cv"]],
                         on="trial", how="left")
 
-    named = []
-    for spec in final.fit.specs:
-        named.append({"effect": spec.name, "scope": "global", "params": dict(spec.params),
-                      "ci95": ci_of(spec, ci),
-                      "units": spec.units()})
-        fx1 = AppliedEffects([spec.instance()])
-        if fx1.changes_diameter and len(at.screen.cal_s):
-            # what the calipers would have read differently (mm), against their own scatter
-            named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(at.screen.caliper_change(fx1)))),
-                                           "caliper_scatter": 1e3 * at.screen.cal_sigma}
+    named = _named_entries(final.fit.specs, ci, at.screen)
     notes.extend(mark_close_calls(named, sel.close_calls))
-    if obstruction or early:
-        local = {k: ({"onset_mm": v, "excluded": True, "reason": unscored[k]} if k in unscored else {"onset_mm": v})
-                 for k, v in onsets.items()}
-        for k, rc in recontact.items():  # the contact the record up to the elbow puts earlier
-            local[k].update(contact_mm=rc.fit.onset_mm, record_end_mm=rc.record_end_mm)
-        local.update({k: {"onset_mm": e.onset_mm, "contact_mm": e.contact_mm, "excluded": True}
-                      for k, e in early.items()})
-        named.append({"effect": "obstruction", "scope": "per_trial", "params": {},
-                      "local": dict(sorted(local.items())), "ci95": {}, "n_trials": len(onsets),
-                      "n_excluded_early_contact": len(early), "n_excluded_unscored": len(unscored)})
-    if recontact:
-        notes.append(f"{len(recontact)} obstructed trial(s) touch earlier than the field stage's contact knee, which "
-                     "an elbow inside its search pulled late: onset and field stiffness from the record up to the "
-                     "elbow (" + ", ".join(f"{k}: contact {fields0[k].fit.onset_mm - rc.fit.onset_mm:.1f} mm earlier"
-                                           for k, rc in sorted(recontact.items())) + ")")
-    if drifts:
-        notes.append(f"{len(drifts)} trial(s) rise slowly before their contact knee, and the model's level for the cane "
-                     "(its other pushes', and all pushes') is nearer the slope after the knee than that ramp: read as "
-                     "the load cell drifting before contact, not as a contact before an obstruction; scored as usual "
-                     f"({', '.join(sorted(drifts))})")
+    if obstruction or fc.early:
+        named.append(_obstruction_entry(fc, unscored))
+    notes.extend(_contact_notes(fc))
     timing["bootstrap_s"] = time.perf_counter() - t4
 
     # -- is it an explanation?
@@ -539,6 +455,102 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     if outp is not None:
         write_outputs(result, outp, preset, ci)
     return result
+
+
+def _trial_table(trials: list[Trial], fc: FieldContacts, k_base: dict[str, float],
+                 sim_why: dict[str, str]) -> pd.DataFrame:
+    """One row per trial: the screen's features, the contacts found, both stiffnesses and, for a
+    trial left out of the scoring, why (``not_scored``; empty where it is scored)."""
+    onsets, early = fc.onsets, fc.early
+    feats = _features(trials, fc.geoms, fc.fields)
+    feats["obstruction_onset_mm"] = [onsets[t] if t in onsets else early[t].onset_mm if t in early else math.nan
+                                     for t in feats.trial]
+    feats["early_contact_mm"] = [early[t].contact_mm if t in early else math.nan for t in feats.trial]
+    feats["k_base"] = [k_base.get(t, math.nan) for t in feats.trial]
+    feats["k_field"] = [fc.fields[t].k for t in feats.trial]
+    # a trial left out of the scoring says why, in the table, the JSON and the notes: a trace too
+    # short to fit (a very stiff cane that reaches the rig's stop in a few steps) must not vanish.
+    # The reason is the one test of whether a trial is scored, so the two cannot disagree.
+    feats["not_scored"] = [not_scored_reason(t, fc.fields.get(t), early, k_base, sim_why) for t in feats.trial]
+    return feats
+
+
+def _not_named_notes(unsupported: list[dict], stale: Iterable[str], too_small: dict | None, named_any: bool,
+                     min_change: float) -> list[str]:
+    """The notes on what passed the selection but is not named: an interval that reaches no effect
+    (:func:`.selection.drop_unsupported`), an effect gone stale after that, a best fit too small to
+    name (:attr:`.selection.Selection.too_small`). ``named_any``: whether anything is still named."""
+    notes = []
+    for u in unsupported:
+        beside = f", beside {u['dropped_with']}, which it entered the model with as a pair" if "dropped_with" in u else ""
+        if u["covers_null"]:
+            notes.append(f"{u['effect']} passed the selection ("
+                         + ", ".join(f"{k} = {v:.4g}" for k, v in u["params"].items()) + f") but is not named{beside}: its "
+                         + "; ".join(f"95 % interval of {k}, [{u['ci95'][k][0]:.4g}, {u['ci95'][k][1]:.4g}], reaches "
+                                     f"its no-effect value" for k in u["covers_null"])
+                         + ("; the rest refitted without it" if named_any else "; nothing else is in the model")
+                         + ", and the result flagged unexplained: the residuals leaned its way significantly, and "
+                           "nothing named takes that")
+        else:
+            notes.append(f"{u['effect']} is not named{beside}: it failed the selection alone, and the pair no "
+                         f"longer stands")
+    if stale:
+        notes.append(f"dropped as stale once an effect was not named: {', '.join(stale)}")
+    if too_small:
+        ts = too_small
+        notes.append(f"{ts['effect']} (" + ", ".join(f"{k} = {v:.4g}" for k, v in ts["params"].items())
+                     + f") fitted the residual best at step {ts['step']} (BIC {ts['bic']:.1f}; the residuals lean "
+                     f"its way, p = {ts['p']:.2g}) but changes the model by {ts['net_change_mean_abs']:.3g} in mean "
+                     f"|ln k|, under {min_change:.3g}: too small to name; {', '.join(ts['outranked'])} passed every "
+                     f"rule but {'fits' if len(ts['outranked']) == 1 else 'fit'} worse, and nothing is named in its "
+                     f"place; the result is flagged unexplained")
+    return notes
+
+
+def _named_entries(specs: Iterable[EffectSpec], ci: dict, screen: ScreenSet) -> list[dict[str, Any]]:
+    """``discovery.json``'s ``named`` entries of the global effects fitted, with their intervals and,
+    for an effect on the diameter, how much the calipers would have read differently."""
+    named = []
+    for spec in specs:
+        named.append({"effect": spec.name, "scope": "global", "params": dict(spec.params),
+                      "ci95": ci_of(spec, ci),
+                      "units": spec.units()})
+        fx1 = AppliedEffects([spec.instance()])
+        if fx1.changes_diameter and len(screen.cal_s):
+            # what the calipers would have read differently (mm), against their own scatter
+            named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(screen.caliper_change(fx1)))),
+                                           "caliper_scatter": 1e3 * screen.cal_sigma}
+    return named
+
+
+def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:
+    """The per-trial obstruction's ``named`` entry: each onset, a moved contact's cut, and the trials
+    left out (an early contact, or an obstructed trial that is not scored, with its reason)."""
+    local = {k: ({"onset_mm": v, "excluded": True, "reason": unscored[k]} if k in unscored else {"onset_mm": v})
+             for k, v in fc.onsets.items()}
+    for k, rc in fc.recontact.items():  # the contact the record up to the elbow puts earlier
+        local[k].update(contact_mm=rc.fit.onset_mm, record_end_mm=rc.record_end_mm)
+    local.update({k: {"onset_mm": e.onset_mm, "contact_mm": e.contact_mm, "excluded": True}
+                  for k, e in fc.early.items()})
+    return {"effect": "obstruction", "scope": "per_trial", "params": {},
+            "local": dict(sorted(local.items())), "ci95": {}, "n_trials": len(fc.onsets),
+            "n_excluded_early_contact": len(fc.early), "n_excluded_unscored": len(unscored)}
+
+
+def _contact_notes(fc: FieldContacts) -> list[str]:
+    """The notes on contacts moved before an elbow and on ramps read as drift."""
+    notes = []
+    if fc.recontact:
+        notes.append(f"{len(fc.recontact)} obstructed trial(s) touch earlier than the field stage's contact knee, "
+                     "which an elbow inside its search pulled late: onset and field stiffness from the record up to "
+                     "the elbow (" + ", ".join(f"{k}: contact {fc.fields0[k].fit.onset_mm - rc.fit.onset_mm:.1f} mm "
+                                               "earlier" for k, rc in sorted(fc.recontact.items())) + ")")
+    if fc.drifts:
+        notes.append(f"{len(fc.drifts)} trial(s) rise slowly before their contact knee, and the model's level for the "
+                     "cane (its other pushes', and all pushes') is nearer the slope after the knee than that ramp: "
+                     "read as the load cell drifting before contact, not as a contact before an obstruction; scored "
+                     f"as usual ({', '.join(sorted(fc.drifts))})")
+    return notes
 
 
 def mark_close_calls(named: list[dict], close_calls: list[dict]) -> list[str]:
@@ -598,152 +610,6 @@ def not_scored_reason(tid: str, fr: Any, early: dict, k_base: dict[str, float], 
     if not (np.isfinite(k_b) and k_b > 0):
         return f"no baseline stiffness: {sim_why.get(tid) or 'the engine gave none'}"
     return ""
-
-
-class Recontact(NamedTuple):
-    """An obstructed trial's contact moved before the field stage's knee (:func:`contacts_before_elbows`)."""
-
-    fit: FieldFit  #: the field fit of the record up to the elbow; its ``onset_mm`` is the contact
-    record_end_mm: float  #: the elbow, mm of travel from the record's first sample: where it is cut
-
-    @property
-    def onset_mm(self) -> float:
-        """The elbow, mm after the contact."""
-        return self.record_end_mm - self.fit.onset_mm
-
-
-def contacts_before_elbows(onsets: dict[str, float], fields: dict) -> dict[str, Recontact]:
-    """The field fit of each obstructed trial's record up to its elbow, where that puts contact earlier.
-
-    The field stage's contact knee is a flat-then-line hinge over the record until the force has
-    risen 150 gf (:func:`~canebench.measure.field.extract_field_stiffness`). A soft cane's second
-    body can engage within that: the one line then spans the cane's ramp and the steeper rise
-    after the elbow, and the knee lands late, inside the ramp (an independent generator's softest
-    obstructed trials, 0.02-0.04 N/mm: 6-10 mm late, and their onsets, counted from it, as much too
-    early). Up to the elbow the record is flat, then the cane's line, and the same hinge finds the
-    contact there. The elbow itself was found on the trace from the late knee, whose tare and
-    origin were wrong: it is found again on the trace from the new contact (up to the rig's stop,
-    as :func:`field_onsets` searches), and the record cut there is fitted once more (a self-test
-    set's noisy 0.046 N/mm trial: the first cut kept three samples past the elbow, 0.072 N/mm; the
-    second, one, 0.054 N/mm). Returned, by trial id, where the contact is at least one sample
-    earlier than the knee and the record up to the elbow gives a usable slope. The obstruction
-    effect then carries the cut (``record_end_mm``) with the onset counted from that contact, so
-    every field stage of the run, the simulations' push lengths and the exported fits among them,
-    reads the trial the same way.
-    """
-    out: dict[str, Recontact] = {}
-    for tid, o in onsets.items():
-        fr = fields[tid]
-        rig = read_rig_csv(fr.trial.csv)
-
-        def up_to(end: float) -> FieldFit:
-            return extract_field_stiffness(rig.up_to(end), max_travel_mm=SIM_TRAVEL_MM)
-
-        elbow = fr.fit.onset_mm + o  # from the record's first sample, as the knee
-        ff = up_to(elbow)
-        if not (ff.usable and ff.onset_mm < fr.fit.onset_mm - 0.25):
-            continue
-        x = rig.displacement_mm
-        after = contact_samples(rig.force_gf, int(np.searchsorted(x, ff.onset_mm - 1e-9)))
-        again = _elbow(x[after] - ff.onset_mm, (rig.force_gf[after] - ff.tare_gf) * GF_TO_N)
-        if again is not None:
-            ff2 = up_to(ff.onset_mm + again.onset_mm)
-            if ff2.usable and ff2.onset_mm < fr.fit.onset_mm - 0.25:
-                ff, elbow = ff2, ff.onset_mm + again.onset_mm
-        out[tid] = Recontact(ff, elbow)
-    return out
-
-
-def early_contacts(fields: dict, knees: Mapping[str, float] | None = None) -> dict[str, EarlyContact]:
-    """Soft contact ramps before the field stage's contact knee (:func:`onsets.detect_early_contact`),
-    by trial id: candidates, which :func:`_ramps_that_are_the_cane` splits into contacts and drifts.
-
-    ``knees`` (mm of travel from the record's first sample, by trial id) replaces a trial's knee:
-    the contacts :func:`contacts_before_elbows` moved. Before the knee the field stage found, such
-    a trial's ramp is the cane's own and the steeper rise after it the elbow (an independent
-    generator's soft canes: two true obstructions were left out as early contacts, their onsets
-    5-6 mm early, while the old knee was searched); before the moved contact, a ramp is what it
-    is in any trial.
-    """
-    knees = knees or {}
-    early = {}
-    for tid, fr in fields.items():
-        # (a trace fitted poorly as a whole is searched too: with an elbow it is scored up to it)
-        if fr.fit is not None and fr.fit.rises and fr.trial.csv is not None and np.isfinite(fr.fit.onset_mm):
-            rig = read_rig_csv(fr.trial.csv)
-            e = detect_early_contact(rig.displacement_mm, rig.force_gf, knees.get(tid, fr.fit.onset_mm))
-            if e is not None:
-                early[tid] = e
-    return early
-
-
-def contact_levels(trials: list, geoms: dict, fields: dict,
-                   exclude: set[str]) -> tuple[dict[str, float], dict[str, list[float]], list[float]]:
-    """The model's stiffness per trial and the levels ln(k_field / k_model) an early contact is judged by.
-
-    Returns k_model (N/mm, the baseline's linear compliance, :meth:`TrialGeometry.compliance`;
-    NaN where that is not positive), each cane's ln ratios over its pushes with a usable slope
-    outside ``exclude`` (pushes with an onset or a candidate of their own), and all of them pooled.
-    """
-    cane_of = {t.id: t.cane.id for t in trials}
-    k_model = {tid: 1e-3 / c if (c := g.compliance()[0]) > 0 else math.nan for tid, g in geoms.items()}
-    by_cane: dict[str, list[float]] = {}
-    for tid, fr in fields.items():
-        k = fr.k
-        if tid in exclude or not (np.isfinite(k) and k > 0 and np.isfinite(k_model[tid])):
-            continue
-        by_cane.setdefault(cane_of[tid], []).append(math.log(k / k_model[tid]))
-    return k_model, by_cane, [v for vs in by_cane.values() for v in vs]
-
-
-def _ramps_that_are_the_cane(early: dict, trials: list, geoms: dict, fields: dict,
-                             onsets: dict) -> tuple[dict, dict]:
-    """Split early-contact candidates into contacts (the ramp is the cane) and drifts.
-
-    A candidate's levels are the median ln(k_field / k_model) of its cane's other pushes and of
-    every push in the data (:func:`contact_levels`). It is a drift only when neither level puts
-    the cane nearer the ramp's slope than the slope after the knee
-    (:func:`onsets.ramp_is_the_cane`): a cane's other push can carry an elbow no test found (a
-    self-test cane's did, 2.1 in ln above the model), and the data's median alone would ignore
-    how much real canes differ from one another.
-    """
-    if not early:
-        return early, {}
-    cane_of = {t.id: t.cane.id for t in trials}
-    k_model, by_cane, pooled = contact_levels(trials, geoms, fields, set(early) | set(onsets))
-    kept, drifts = {}, {}
-    for tid, e in early.items():
-        levels = [float(np.median(v)) for v in (by_cane.get(cane_of[tid]), pooled) if v]
-        if not levels or any(ramp_is_the_cane(e, k_model[tid] / GF_TO_N, lv) for lv in levels):
-            kept[tid] = e
-        else:
-            drifts[tid] = e
-    return kept, drifts
-
-
-def _elbow(x_mm: np.ndarray, f_n: np.ndarray) -> Onset | None:
-    """The elbow of a tared contact trace within the simulation's push (:data:`SIM_TRAVEL_MM`)."""
-    within = x_mm <= SIM_TRAVEL_MM
-    return detect_onset(x_mm[within], f_n[within])
-
-
-def field_onsets(fields: dict) -> dict[str, float]:
-    """Obstruction onsets (mm after contact) in the field traces, by trial id.
-
-    Only the push the simulation makes is searched (its first :data:`SIM_TRAVEL_MM` of contact,
-    the whole trace wherever contact ends within it, as every real trace does): an elbow past
-    it changes no slope on either side, so it names nothing. Traces a straight line fits poorly
-    are searched too: a strong elbow is what makes them so (the real b5c2t3's 27-fold one at
-    37 mm leaves R^2 = 0.62). Up to its onset such a trace is scored like any other where it is
-    a line there (those that are not are listed as not scored).
-    """
-    onsets: dict[str, float] = {}
-    for tid, fr in fields.items():
-        if fr.fit is not None and fr.fit.rises and fr.fit.displacement_mm is not None:
-            o = _elbow(fr.fit.displacement_mm, fr.fit.force_n)
-            if o is not None:
-                onsets[tid] = o.onset_mm
-    return onsets
 
 
 def write_outputs(res: DiscoveryResult, out: Path, preset: str, ci: dict) -> None:

@@ -6,7 +6,7 @@ has a soft ramp before the field stage's contact knee (``onsets.detect_early_con
 listed with its ramp's and its slope-after's ln(slope / k_model) (k_model: the screen's linear
 compliance under the default model), the cane's and the data's levels (median ln(k_field /
 k_model) of pushes with neither an onset nor a candidate), and the workflow's verdict
-(``workflow._ramps_that_are_the_cane``). No simulation: seconds per dataset.
+(``contacts.split_early_contacts``). No simulation: seconds per dataset.
 
 Run: ``python tests/scripts/early_contacts.py DIR [DIR ...]``
 """
@@ -17,8 +17,9 @@ import numpy as np
 
 from canebench.data.dataset import load_dataset
 from canebench.discovery.screen import trial_geometry
-from canebench.discovery.workflow import (BASELINES, _ramps_that_are_the_cane, contact_levels,
-                                         contacts_before_elbows, early_contacts, field_onsets)
+from canebench.discovery.contacts import (contact_levels, contacts_before_elbows, early_contacts, field_onsets,
+                                         split_early_contacts)
+from canebench.discovery.workflow import BASELINES
 from canebench.execute.pipeline import field_stage
 from canebench.model.presets import PRESETS
 from canebench.probe.protocol import PROTOCOLS
@@ -37,7 +38,7 @@ def main() -> None:
             print(f"{root}: {len(trials)} trials, no early contact")
             continue
         geoms = {t.id: trial_geometry(t, cfg) for t in trials}
-        kept, drifts = _ramps_that_are_the_cane(early, trials, geoms, fields, onsets)
+        kept, drifts = split_early_contacts(early, trials, geoms, fields, onsets)
         k_model, by_cane, pooled = contact_levels(trials, geoms, fields, set(early) | set(onsets))
         cane_of = {t.id: t.cane.id for t in trials}
         print(f"{root}: {len(trials)} trials, {len(early)} early contact(s): {len(kept)} kept, {len(drifts)} drift(s)")

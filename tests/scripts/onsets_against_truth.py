@@ -1,11 +1,11 @@
 """Obstruction onsets found in the field traces against a generator's truth, counted from the
 field stage's contact knee and from the knee of the record up to the elbow
-(``workflow.contacts_before_elbows``).
+(``contacts.contacts_before_elbows``).
 
 Self-test mode generates (or reuses) the self-test's obstruction sets (cases with ``obstruction``
 among their hidden effects) of each seed under OUT/s<seed>/ and reads the truth's
 ``obstructed`` onsets (mm after contact). For each set it prints the onsets found
-(``workflow.field_onsets``, before the early-contact split), how many are true, the median and
+(``contacts.field_onsets``, before the early-contact split), how many are true, the median and
 largest absolute onset error both ways, the trials whose contact moved (mm earlier), and how far
 their field stiffness (the record up to the elbow) is from the truth's linear one.
 No simulation: about a minute per generated set, seconds per set after.
@@ -21,7 +21,7 @@ import numpy as np
 
 from canebench.data.dataset import load_dataset
 from canebench.discovery.selftest import _generate_case, suite
-from canebench.discovery.workflow import contacts_before_elbows, field_onsets
+from canebench.discovery.contacts import contacts_before_elbows, field_onsets
 from canebench.execute.pipeline import field_stage
 
 

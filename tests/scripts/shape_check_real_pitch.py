@@ -13,7 +13,7 @@ import numpy as np
 
 from canebench.data.dataset import load_dataset
 from canebench.discovery.shape import shape_check, trace_shapes
-from canebench.discovery.workflow import field_onsets
+from canebench.discovery.contacts import field_onsets
 from canebench.execute.executors import SerialExecutor
 from canebench.execute.pipeline import field_stage
 from canebench.execute.runner import run_trials
