@@ -120,17 +120,29 @@ def _generate_case(folder: Path, case: dict[str, Any], max_draws: int = 24) -> N
     truth_path.write_text(json.dumps(truth, indent=1))
 
 
+def discover_case(folder: str | Path, seed: int) -> Any:
+    """The suite's own discovery of one case folder: no engine confirmation, 40 cane resamples,
+    one serial worker, the case's seed (``selftest_row.json``'s ``case.seed``). A stored case can
+    be re-run with it and compared (``tests/scripts/replay_selftest_cases.py``).
+
+    Returns the :class:`.workflow.DiscoveryResult`.
+    """
+    from canebench.data.dataset import load_dataset
+    from canebench.execute.executors import make_executor
+
+    from .workflow import discover
+
+    return discover(load_dataset(folder), confirm=False, executor=make_executor("serial", 1, None), n_boot=40,
+                    seed=seed)
+
+
 def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     """Score one case; a finished case is reused when its spec and canebench's code are unchanged.
 
     The row is written to ``<case>/selftest_row.json`` as soon as it exists, so an
     interrupted suite resumes where it stopped.
     """
-    from canebench.data.dataset import load_dataset
-    from canebench.execute.executors import make_executor
     from canebench.execute.jobs import code_fingerprint
-
-    from .workflow import discover
 
     folder = Path(root) / case["id"]
     done = folder / "selftest_row.json"
@@ -152,8 +164,7 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
         _generate_case(folder, case)
         _write_json_atomic(stamp, made)
     t0 = time.perf_counter()
-    res = discover(load_dataset(folder), confirm=False, executor=make_executor("serial", 1, None), n_boot=40,
-                   seed=case["seed"])
+    res = discover_case(folder, case["seed"])
     doc = res.to_json()
     # what the row was scored from, beside it: a row can be checked or re-scored without re-running
     _write_json_atomic(folder / "discovery.json", doc)

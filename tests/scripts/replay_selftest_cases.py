@@ -1,0 +1,40 @@
+"""Re-run stored self-test cases with the suite's own call and say whether ``discovery.json`` is unchanged.
+
+For a change that must not alter the workflow's behaviour (a refactor): each ``CASE`` is a case
+folder of an earlier ``canebench discover --selftest --out DIR`` run (it holds the dataset,
+``selftest_row.json`` and the ``discovery.json`` the suite wrote). The case is discovered again by
+:func:`canebench.discovery.selftest.discover_case` with its stored seed, on the installed code, and
+the two documents are compared without ``timing_s`` (:func:`compare_discoveries.json_diff`). Nothing
+is written. Minutes per case (no engine confirmation, 40 resamples, one worker).
+
+Run: ``python tests/scripts/replay_selftest_cases.py CASE [CASE ...]``; exits 1 if any case differs.
+"""
+import json
+import sys
+import time
+from pathlib import Path
+
+from canebench.discovery.selftest import discover_case
+from compare_discoveries import json_diff  # beside this script
+
+
+def main(cases: list[str]) -> int:
+    differs = 0
+    for d in map(Path, cases):
+        seed = json.loads((d / "selftest_row.json").read_text())["case"]["seed"]
+        t0 = time.perf_counter()
+        # through JSON as the suite wrote it, so both sides hold the same types
+        new = json.loads(json.dumps(discover_case(d, seed).to_json(), default=float))
+        old = json.loads((d / "discovery.json").read_text())
+        for doc in (old, new):
+            doc.pop("timing_s", None)
+        found = list(json_diff(old, new))
+        differs += bool(found)
+        print(f"{d}: {'identical' if not found else 'DIFFERS'} ({time.perf_counter() - t0:.0f} s)", flush=True)
+        for kind, path in found[:20]:
+            print(f"    {kind}: {path}")
+    return 1 if differs else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
