@@ -457,6 +457,32 @@ def test_onset_on_the_real_elbow(field_dir):
     assert before.k_n_per_mm == pytest.approx(o.slope_before, rel=0.15)
 
 
+@pytest.mark.field
+def test_read_contacts_scores_the_real_elbow_with_the_config_it_returns(field_dir):
+    """The contacts stage on the README's obstructed cane: its second field stage and the baseline's
+    configuration are one object, which differs from the base configuration by the obstruction only."""
+    from canebench.data.dataset import load_dataset
+    from canebench.discovery.contacts import read_contacts
+    from canebench.execute.pipeline import field_stage
+    from canebench.model.config import ModelConfig
+
+    trials = load_dataset(field_dir, "b5c2*")
+    cfg0 = ModelConfig()
+    fc = read_contacts(trials, None, cfg0)
+    # the README's elbow (near 40 mm); the cane's other two pushes rise without one
+    assert set(fc.onsets) == {"b5c2t3"} and 30 <= fc.onsets["b5c2t3"] <= 42
+    assert not fc.early and not fc.recontact
+    assert [e.name for e in fc.obstruction] == ["obstruction"]
+    assert fc.config.effects == fc.obstruction and fc.config.replace(effects=()) == cfg0
+    # the whole trace is unusable (R^2 0.62); read up to its elbow, it is scored
+    assert not fc.fields0["b5c2t3"].fit.usable and fc.fields["b5c2t3"].fit.usable
+    again = field_stage(trials, None, fc.config)
+    for tid in ("b5c2t1", "b5c2t2", "b5c2t3"):
+        assert fc.fields[tid].fit.k_n_per_mm == again[tid].fit.k_n_per_mm
+    for tid in ("b5c2t1", "b5c2t2"):  # no onset: the obstruction leaves their fits alone
+        assert fc.fields[tid].fit.k_n_per_mm == fc.fields0[tid].fit.k_n_per_mm
+
+
 def test_third_party_effect_plugs_in(cantilever, monkeypatch):
     from canebench.model import effects as fxmod
     from canebench.model.effects import EFFECTS, Effect, Parameter

@@ -198,6 +198,9 @@ class FieldContacts:
     drifts: dict[str, EarlyContact]
     #: the per-trial obstruction effect, or ``()`` when fewer than :data:`MIN_OBSTRUCTED` trials have an onset
     obstruction: tuple[EffectSpec, ...]
+    #: the baseline's configuration with :attr:`obstruction` as its effects: the second field stage's,
+    #: and the one the baseline engines run
+    config: ModelConfig
     #: the screen's geometry of every trial (:func:`.screen.trial_geometry` on the base configuration)
     geoms: dict[str, Any]
     #: seconds spent building :attr:`geoms`
@@ -239,5 +242,6 @@ def read_contacts(trials: list[Trial], fit_window_mm: float, cfg0: ModelConfig) 
         obstruction = (EffectSpec("obstruction", (), tuple(sorted(
             (k, (("onset_mm", v),) + ((("record_end_mm", recontact[k].record_end_mm),) if k in recontact else ()))
             for k, v in onsets.items())), "per_trial"),)
-    fields = field_stage(trials, fit_window_mm, cfg0.replace(effects=obstruction))
-    return FieldContacts(fields0, fields, onsets, recontact, early, drifts, obstruction, geoms, geometry_s)
+    config = cfg0.replace(effects=obstruction)
+    fields = field_stage(trials, fit_window_mm, config)
+    return FieldContacts(fields0, fields, onsets, recontact, early, drifts, obstruction, config, geoms, geometry_s)

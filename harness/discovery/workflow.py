@@ -306,8 +306,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
 
     # -- field, obstruction onsets (no simulation)
     fc = read_contacts(trials, proto.fit_window_mm, cfg0)
-    obstruction = fc.obstruction
-    cfg_b = cfg0.replace(effects=obstruction)
+    obstruction, cfg_b = fc.obstruction, fc.config
     timing["geometry_s"] = fc.geometry_s
     timing["field_s"] = time.perf_counter() - t_start - timing["geometry_s"]
 

@@ -11,12 +11,30 @@ as added, not as a difference); whether each CSV (``discovery``, ``_steps``, ``_
 whether ``model.yaml`` is, apart from the lines that record when and by which commit it was
 written.
 """
+import glob
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
 import pandas as pd
+
+
+def load_doc(path, drop=("timing_s", "provenance")):
+    """A stored ``discovery.json`` without the keys in ``drop``: by default those that differ between
+    two runs of the same code on the same data (the stages' seconds, and what wrote it)."""
+    doc = json.loads(Path(path).read_text())
+    for key in drop:
+        doc.pop(key, None)
+    return doc
+
+
+def discovery_files(root):
+    """Every ``discovery.json`` in ``root`` or one folder below it (a self-test run's case folders,
+    or one ``canebench discover --out`` folder), sorted."""
+    return sorted(set(glob.glob(os.path.join(root, "*", "discovery.json"))
+                      + glob.glob(os.path.join(root, "discovery.json"))))
 
 
 def json_diff(a, b, path=""):
@@ -54,12 +72,7 @@ def _short(paths, n=6):
 if __name__ == "__main__":
     before, after = Path(sys.argv[1]), Path(sys.argv[2])
     for name in sys.argv[3:]:
-        docs = []
-        for root in (before, after):
-            d = json.loads((root / name / "discovery.json").read_text())
-            d.pop("timing_s", None)
-            d.pop("provenance", None)
-            docs.append(d)
+        docs = [load_doc(root / name / "discovery.json") for root in (before, after)]
         found = list(json_diff(*docs))
         changed, only_b, only_a = ([p for k, p in found if k == kind] for kind in ("changed", "before", "after"))
         text = "json identical" if not changed else f"json DIFFERS at {_short(changed)}"

@@ -21,13 +21,13 @@ withholding anything (no global name, or only an obstruction's per-trial ones), 
 
 Run: ``python tests/scripts/spread_allowance.py DIR [DIR ...]`` (a second per 40 sets).
 """
-import glob
 import json
 import os
 import sys
 
 from canebench.discovery.adequacy import within_dispersion
 from canebench.discovery.verdict import WITHIN_EXCESS, WITHIN_FLOOR
+from compare_discoveries import discovery_files  # beside this script
 
 FACTORS = (4.0, 5.0, 6.0, 7.0, WITHIN_EXCESS)
 FLOORS = (0.05, 0.06, 0.08, WITHIN_FLOOR)
@@ -36,8 +36,7 @@ FLOORS = (0.05, 0.06, 0.08, WITHIN_FLOOR)
 def load(roots: list[str]) -> list[dict]:
     sets = []
     for root in roots:
-        files = sorted(set(glob.glob(os.path.join(root, "*", "discovery.json"))
-                           + glob.glob(os.path.join(root, "discovery.json"))))
+        files = discovery_files(root)
         for f in files:
             d = json.load(open(f))
             a = d.get("adequacy", {})

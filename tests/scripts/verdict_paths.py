@@ -15,7 +15,6 @@ For every ``discovery.json`` under the folders given (a self-test run's case fol
 
 Run: ``python tests/scripts/verdict_paths.py DIR [DIR ...]`` (a few seconds per 40 sets).
 """
-import glob
 import json
 import os
 import sys
@@ -25,12 +24,12 @@ import pandas as pd
 
 from canebench.discovery.structure import structure_tests
 from canebench.discovery.verdict import STRUCTURE_ALPHA, TREND_WARNING_ALPHA
+from compare_discoveries import discovery_files  # beside this script
 
 
 def main() -> None:
     for root in sys.argv[1:]:
-        files = sorted(set(glob.glob(os.path.join(root, "*", "discovery.json"))
-                           + glob.glob(os.path.join(root, "discovery.json"))))
+        files = discovery_files(root)
         hits = 0
         for f in files:
             j = json.load(open(f))
