@@ -460,17 +460,20 @@ def test_onset_on_the_real_elbow(field_dir):
 @pytest.mark.field
 def test_read_contacts_scores_the_real_elbow_with_the_config_it_returns(field_dir):
     """The contacts stage on the README's obstructed cane: its second field stage and the baseline's
-    configuration are one object, which differs from the base configuration by the obstruction only."""
+    configuration are the same configuration, which differs from the base one by the obstruction only."""
     from canebench.data.dataset import load_dataset
     from canebench.discovery.contacts import read_contacts
     from canebench.execute.pipeline import field_stage
     from canebench.model.config import ModelConfig
 
     trials = load_dataset(field_dir, "b5c2*")
-    cfg0 = ModelConfig()
+    # not the default: the config returned must be built from this one (damping plays no part in
+    # a contact or a field fit)
+    cfg0 = ModelConfig(damping=0.2)
     fc = read_contacts(trials, None, cfg0)
-    # the README's elbow (near 40 mm); the cane's other two pushes rise without one
-    assert set(fc.onsets) == {"b5c2t3"} and 30 <= fc.onsets["b5c2t3"] <= 42
+    # the README's elbow near 40 mm (the raw record: 261 gf at 38 mm, 632 gf at 40 mm, contact at
+    # its first sample); the cane's other two pushes rise without one
+    assert set(fc.onsets) == {"b5c2t3"} and 34 <= fc.onsets["b5c2t3"] <= 41
     assert not fc.early and not fc.recontact
     assert [e.name for e in fc.obstruction] == ["obstruction"]
     assert fc.config.effects == fc.obstruction and fc.config.replace(effects=()) == cfg0
