@@ -79,17 +79,17 @@ if __name__ == "__main__":
         text = "json identical" if not changed else f"json DIFFERS at {_short(changed)}"
         if only_b or only_a:
             text += f" (keys only before: {_short(only_b) or '-'}; only after: {_short(only_a) or '-'})"
-        csvs = []
+        verdicts = []
         for f in ("discovery.csv", "discovery_steps.csv", "discovery_structure.csv", "discovery_engines.csv"):
             pb, pa = before / name / f, after / name / f
             if pb.exists() or pa.exists():
                 verdict, extra = csv_diff(pb, pa)
-                csvs.append(f"{f} {verdict}" + (f" [{' '.join(extra)}]" if extra else ""))
+                verdicts.append(f"{f} {verdict}" + (f" [{' '.join(extra)}]" if extra else ""))
         stamp = ("created", "git_commit", "canebench:")
         paths = [root / name / "model.yaml" for root in (before, after)]
         if all(p.exists() for p in paths):
             models = [[ln for ln in p.read_text().splitlines() if not any(k in ln for k in stamp)] for p in paths]
-            csvs.append("model.yaml same" if models[0] == models[1] else "model.yaml DIFFERS")
+            verdicts.append("model.yaml same" if models[0] == models[1] else "model.yaml DIFFERS")
         elif any(p.exists() for p in paths):  # a self-test case writes none
-            csvs.append("model.yaml on one side only")
-        print(name, "; ".join([text, *csvs]))
+            verdicts.append("model.yaml on one side only")
+        print(name, "; ".join([text, *verdicts]))
