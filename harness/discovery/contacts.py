@@ -196,8 +196,6 @@ class FieldContacts:
     early: dict[str, EarlyContact]
     #: ramps before the knee read as the load cell drifting: scored as usual
     drifts: dict[str, EarlyContact]
-    #: the per-trial obstruction effect, or ``()`` when fewer than :data:`MIN_OBSTRUCTED` trials have an onset
-    obstruction: tuple[EffectSpec, ...]
     #: the baseline's configuration with :attr:`obstruction` as its effects: the second field stage's,
     #: and the one the baseline engines run
     config: ModelConfig
@@ -205,6 +203,14 @@ class FieldContacts:
     geoms: dict[str, Any]
     #: seconds spent building :attr:`geoms`
     geometry_s: float
+
+    @property
+    def obstruction(self) -> tuple[EffectSpec, ...]:
+        """The per-trial obstruction effect, or ``()`` when fewer than :data:`MIN_OBSTRUCTED` trials have an onset.
+
+        It is :attr:`config`'s effects, read from there so the two cannot disagree.
+        """
+        return self.config.effects
 
 
 def read_contacts(trials: list[Trial], fit_window_mm: float, cfg0: ModelConfig) -> FieldContacts:
@@ -244,4 +250,4 @@ def read_contacts(trials: list[Trial], fit_window_mm: float, cfg0: ModelConfig) 
             for k, v in onsets.items())), "per_trial"),)
     config = cfg0.replace(effects=obstruction)
     fields = field_stage(trials, fit_window_mm, config)
-    return FieldContacts(fields0, fields, onsets, recontact, early, drifts, obstruction, config, geoms, geometry_s)
+    return FieldContacts(fields0, fields, onsets, recontact, early, drifts, config, geoms, geometry_s)
