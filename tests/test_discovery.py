@@ -475,7 +475,9 @@ def test_read_contacts_scores_the_real_elbow_with_the_config_it_returns(field_di
     # its first sample); the cane's other two pushes rise without one
     assert set(fc.onsets) == {"b5c2t3"} and 34 <= fc.onsets["b5c2t3"] <= 41
     assert not fc.early and not fc.recontact
-    assert [e.name for e in fc.obstruction] == ["obstruction"]
+    # the configuration's one effect is the obstruction, per trial, at the onset found
+    assert [(e.name, e.scope) for e in fc.config.effects] == [("obstruction", "per_trial")]
+    assert fc.config.effects[0].local == (("b5c2t3", (("onset_mm", fc.onsets["b5c2t3"]),)),)
     assert fc.config.replace(effects=()) == cfg0
     # the whole trace is unusable (R^2 0.62); read up to its elbow, it is scored
     assert not fc.fields0["b5c2t3"].fit.usable and fc.fields["b5c2t3"].fit.usable
