@@ -196,8 +196,8 @@ class FieldContacts:
     early: dict[str, EarlyContact]
     #: ramps before the knee read as the load cell drifting: scored as usual
     drifts: dict[str, EarlyContact]
-    #: the baseline's configuration with :attr:`obstruction` as its effects: the second field stage's,
-    #: and the one the baseline engines run
+    #: the baseline's configuration with the obstruction found (if any) as its only effect: the second
+    #: field stage's, and the one the baseline engines run
     config: ModelConfig
     #: the screen's geometry of every trial (:func:`.screen.trial_geometry` on the base configuration)
     geoms: dict[str, Any]
