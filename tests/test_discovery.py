@@ -1846,6 +1846,58 @@ def test_a_cane_resample_draws_whole_canes_and_counts_each_copy_as_a_cane(bundle
     assert not all(np.array_equal(a[0], b[0]) for a, b in zip(draws, cane_resamples(at, 30, seed=4)))
 
 
+def test_the_interval_widening_for_few_canes_follows_student_s_t():
+    """The cane bootstrap's percentile interval is widened by t(0.975, G - 1) / z(0.975) * sqrt(G / (G - 1)):
+    checked against printed t-table values (t(0.975, 17) = 2.110, t(0.975, 2) = 4.303, z = 1.960), to
+    the tables' three decimals; it falls toward 1 as canes are added and is infinite below two canes,
+    whose bootstrap has no spread between canes to draw."""
+    from canebench.discovery.fit import small_sample_widening as w
+
+    assert w(18) == pytest.approx(2.110 / 1.960 * (18 / 17) ** 0.5, rel=1e-3)
+    assert w(3) == pytest.approx(4.303 / 1.960 * 1.5 ** 0.5, rel=1e-3)
+    gs = [2, 3, 5, 10, 18, 40, 100, 1000]
+    assert all(a > b > 1.0 for a, b in zip([w(g) for g in gs], [w(g) for g in gs[1:]]))
+    assert w(100000) == pytest.approx(1.0, abs=1e-4)
+    assert w(1) == math.inf and w(0) == math.inf
+
+
+def test_an_interval_is_widened_about_the_fit_in_the_fit_s_coordinate_and_cut_at_the_bounds():
+    """``intervals_from_draws``: each end of the percentile interval moves away from the fit by the
+    widening times its distance. A pitch is widened in degrees and cut at its 45-degree bound; a
+    spring in log, so its low end stays positive where widening in N/m would cross zero and the
+    widened ends stay in the draws' ratio about the fit; an end on the fit's wrong side is the fit;
+    a widening of 1 is the plain percentile interval."""
+    from canebench.discovery.fit import Candidate, Fit, intervals_from_draws, small_sample_widening
+
+    def fit_of(name, value):
+        cand = Candidate.of((name,))
+        x = cand.to_internal({cand.free[0]: value})
+        return Fit(cand, x, cand.specs(x), 0.0, 0.01, 0.01, 54)
+
+    rng = np.random.default_rng(5)
+    # a pitch fitted 30 degrees, its draws 30 +- 2 with five at 43-44
+    pitch = fit_of("probe_misalignment", 30.0)
+    d = np.r_[rng.normal(30.0, 2.0, 95), [43.0, 44.0, 44.0, 44.0, 44.0]].reshape(-1, 1)
+    lo, hi = np.percentile(d[:, 0], [2.5, 97.5])
+    key = ("probe_misalignment", "angle_deg")
+    assert intervals_from_draws(pitch, d, 18, widening=1.0)[key] == pytest.approx((lo, hi), abs=1e-12)
+    wlo, whi = intervals_from_draws(pitch, d, 18)[key]
+    assert 30.0 - wlo == pytest.approx(small_sample_widening(18) * (30.0 - lo), rel=1e-12)
+    assert whi == 45.0  # 30 + 1.11 x (44 - 30), the draws' 97.5th percentile widened, is past the bound
+    # the draws' 2.5th percentile above the fit: the low end is the fit itself, however wide the widening
+    assert intervals_from_draws(pitch, d + 5.0, 18, widening=3.0)[key][0] == 30.0
+    # a rig of 100 N/m, its draws spread by a factor of e^0.4 either way (lognormal)
+    rig = fit_of("rig_compliance", 100.0)
+    d = np.exp(rng.normal(math.log(100.0), 0.4, 4000)).reshape(-1, 1)
+    plo, phi = np.percentile(d[:, 0], [2.5, 97.5])
+    assert 100.0 - 3.0 * (100.0 - plo) < 0  # the premise: widened in N/m, the low end would be negative
+    rlo, rhi = intervals_from_draws(rig, d, 18, widening=3.0)[("rig_compliance", "k_rig")]
+    assert rlo == pytest.approx(20.0)  # positive: cut at the search's lowest rig (20 N/m)
+    rlo, rhi = intervals_from_draws(rig, d, 18, widening=1.5)[("rig_compliance", "k_rig")]
+    assert math.log(100.0 / rlo) == pytest.approx(1.5 * math.log(100.0 / plo), rel=0.02)
+    assert math.log(rhi / 100.0) == pytest.approx(1.5 * math.log(phi / 100.0), rel=0.02)
+
+
 def _scaled_bundled_screen(bundled_trials):
     """The bundled geometry's screen with a modulus scale of 1.5, cane offsets (0.15) and trial noise (0.03)."""
     from canebench.discovery.screen import trial_geometry

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterator
 
 import numpy as np
+from scipy import stats
 from scipy.optimize import minimize
 
 from ..model.effects import EFFECTS, AppliedEffects, EffectSpec, Parameter
@@ -419,16 +420,62 @@ def cane_resamples(at: Anchored, n: int, seed: int) -> Iterator[tuple[np.ndarray
         yield rows, at.take(rows, labels)
 
 
-def bootstrap_ci(fit: Fit, at: Anchored, log_k_field: np.ndarray,
-                 fixed: tuple[EffectSpec, ...] = (), n_boot: int = 100, seed: int = 0) -> dict[tuple[str, str], tuple[float, float]]:
-    """95 % percentile intervals of the free parameters, resampling canes (the independent units)."""
+def small_sample_widening(n_canes: int) -> float:
+    """How far a cane bootstrap's percentile interval is widened about the fit, for ``n_canes`` canes.
+
+    t(0.975, G - 1) / z(0.975) * sqrt(G / (G - 1)): the bootstrap's spread of a between-cane
+    effect carries (G - 1) / G of its variance, and its tails are the normal's where Student's
+    with G - 1 degrees of freedom apply, the offsets' variance being estimated from G canes. 1.11
+    at 18 canes, 1.05 at 40, 2.7 at 3; infinite below two canes (no spread between canes to
+    resample). Where the fitted model is the true one (``python tests/scripts/interval_coverage.py
+    OUT --reps 25 --seed {1,2}``, 18 canes, 200 datasets) the percentile interval alone held the
+    truth 177 times (88.5 %; docs/discovery.md, "How often the intervals hold the truth").
+    """
+    if n_canes < 2:
+        return math.inf
+    return float(stats.t.ppf(0.975, n_canes - 1) / stats.norm.ppf(0.975) * math.sqrt(n_canes / (n_canes - 1)))
+
+
+def bootstrap_draws(fit: Fit, at: Anchored, log_k_field: np.ndarray, fixed: tuple[EffectSpec, ...] = (),
+                    n_boot: int = 100, seed: int = 0) -> np.ndarray:
+    """The free parameters refitted on ``n_boot`` cane resamples (:func:`cane_resamples`), from the
+    fit's own value: one row per resample, one column per free parameter, in their own units."""
     draws = []
     for rows, sub in cane_resamples(at, n_boot, seed):
         f = fit_candidate(fit.candidate, sub, log_k_field[rows], fixed, x0=fit.x)
         vals = {(sp.name, k): v for sp in f.specs[len(fixed):] for k, v in sp.params}
         draws.append([vals[key] for key in fit.candidate.free])
-    arr = np.array(draws)
+    return np.array(draws, float).reshape(-1, len(fit.candidate.free))
+
+
+def intervals_from_draws(fit: Fit, draws: np.ndarray, n_canes: int, fixed: tuple[EffectSpec, ...] = (),
+                         widening: float | None = None) -> dict[tuple[str, str], tuple[float, float]]:
+    """95 % intervals from :func:`bootstrap_draws`: the percentile interval, each end moved away from
+    the fit by ``widening`` times its distance (default :func:`small_sample_widening` of ``n_canes``;
+    1 keeps the plain percentile interval), in the optimizer's coordinate (log for a log parameter,
+    so a spring's end stays positive), and cut at the search bounds. An end on the fit's wrong side
+    (draws that all lie above or below it) is taken to the fit."""
+    value = {(sp.name, k): v for sp in fit.specs[len(fixed):] for k, v in sp.params}
+    w = small_sample_widening(n_canes) if widening is None else widening
+    box_lo, box_hi = fit.candidate.box()
     out = {}
-    for j, key in enumerate(fit.candidate.free):
-        out[key] = (float(np.percentile(arr[:, j], 2.5)), float(np.percentile(arr[:, j], 97.5)))
+    for j, (n, p) in enumerate(fit.candidate.free):
+        log = EFFECTS[n].parameters[p].log
+        col = np.log(draws[:, j]) if log else draws[:, j]
+        x = math.log(value[(n, p)]) if log else value[(n, p)]
+        below, above = max(x - np.percentile(col, 2.5), 0.0), max(np.percentile(col, 97.5) - x, 0.0)
+        # a zero distance stays zero, however wide the widening (inf below two canes)
+        ends = np.clip([x - (w * below if below else 0.0), x + (w * above if above else 0.0)], box_lo[j], box_hi[j])
+        if log:
+            ends = np.exp(ends)
+        out[(n, p)] = (float(ends[0]), float(ends[1]))
     return out
+
+
+def bootstrap_ci(fit: Fit, at: Anchored, log_k_field: np.ndarray, fixed: tuple[EffectSpec, ...] = (),
+                 n_boot: int = 100, seed: int = 0) -> dict[tuple[str, str], tuple[float, float]]:
+    """95 % intervals of the free parameters, resampling canes (the independent units): the
+    percentile interval of :func:`bootstrap_draws`, widened about the fit for the number of canes
+    (:func:`intervals_from_draws`, :func:`small_sample_widening`)."""
+    draws = bootstrap_draws(fit, at, log_k_field, fixed, n_boot, seed)
+    return intervals_from_draws(fit, draws, len(np.unique(at.screen.canes)), fixed)

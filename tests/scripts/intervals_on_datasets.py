@@ -7,7 +7,8 @@ and ``truth/generated_for.json`` beside it: it is run as the self-test runs it, 
 generator's dataset (run with ``canebench discover``'s defaults, 100 resamples and seed 0, also
 without the confirmation, which comes after the intervals). Each case runs
 :func:`canebench.discovery.workflow.discover` serially in one of ``--workers`` processes, its
-output under ``OUT/<case>``, with the final model's bootstrap call recorded. Where that model is
+output under ``OUT/<case>``, with the final model's bootstrap call recorded (its interval is the
+workflow's: a percentile interval, widened about the fit for the number of canes since session 57). Where that model is
 one global effect with one parameter that keeps the diameters (a modulus scale, root or rig
 spring, or probe pitch), the likelihood-ratio intervals of ``interval_coverage.py``
 (:func:`lr_intervals`, cut at chi-square(1)'s and F(1, G - 1)'s 95 % quantiles) are computed
@@ -118,8 +119,8 @@ def main(argv: list[str]) -> None:
     scored = scored_rows(df)
     n = len(scored)
     if n:
-        print(f"{n} of {len(df)} cases scored: percentile {int(scored.covers.sum())}/{n}")
-        print_lr_summary(scored)
+        print(f"{n} of {len(df)} cases scored: the workflow's interval {int(scored.covers.sum())}/{n}")
+        print_lr_summary(scored, base="the workflow's interval's")
     else:
         print(f"none of {len(df)} cases could be scored")
 
