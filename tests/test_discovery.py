@@ -1890,12 +1890,65 @@ def test_an_interval_is_widened_about_the_fit_in_the_fit_s_coordinate_and_cut_at
     rig = fit_of("rig_compliance", 100.0)
     d = np.exp(rng.normal(math.log(100.0), 0.4, 4000)).reshape(-1, 1)
     plo, phi = np.percentile(d[:, 0], [2.5, 97.5])
-    assert 100.0 - 3.0 * (100.0 - plo) < 0  # the premise: widened in N/m, the low end would be negative
+    assert 100.0 - 3.0 * (100.0 - plo) < 0  # widened in N/m, the low end would be negative
     rlo, rhi = intervals_from_draws(rig, d, 18, widening=3.0)[("rig_compliance", "k_rig")]
-    assert rlo == pytest.approx(20.0)  # positive: cut at the search's lowest rig (20 N/m)
+    assert rlo == pytest.approx(20.0)  # cut at the search's lowest rig (20 N/m); the log scale is checked next
     rlo, rhi = intervals_from_draws(rig, d, 18, widening=1.5)[("rig_compliance", "k_rig")]
     assert math.log(100.0 / rlo) == pytest.approx(1.5 * math.log(100.0 / plo), rel=0.02)
     assert math.log(rhi / 100.0) == pytest.approx(1.5 * math.log(phi / 100.0), rel=0.02)
+
+
+def test_a_flare_s_interval_is_widened_per_parameter_and_one_reaching_no_excess_is_not_named():
+    """A flare's two parameters are widened each on its own axis (excess in mm, length in log); an
+    excess whose widened low end reaches 0 (no flare) is what the interval rule withholds
+    (``nulls.covers_null``), while its plain percentile interval does not reach it; an end that
+    all but 2.5 % of the draws lie below is the fit itself; below two canes (no spread between
+    canes) the interval is the whole search range."""
+    from canebench.discovery.fit import Candidate, Fit, intervals_from_draws
+    from canebench.discovery.nulls import covers_null
+
+    cand = Candidate.of(("base_flare",))
+    assert [p for _, p in cand.free] == ["excess_mm", "length_mm"]
+    x = cand.to_internal({("base_flare", "excess_mm"): 2.0, ("base_flare", "length_mm"): 100.0})
+    fit = Fit(cand, x, cand.specs(x), 0.0, 0.01, 0.01, 54)
+    rng = np.random.default_rng(2)
+    # excess drawn 2 +- 0.5 mm but never above the fit; length 100 mm, spread e^0.15 either way
+    d = np.c_[2.0 - np.abs(rng.normal(0.0, 0.5, 400)) - 0.6 * (rng.random(400) < 0.03),
+              np.exp(rng.normal(math.log(100.0), 0.15, 400))]
+    plo = np.percentile(d[:, 0], 2.5)
+    assert 0.0 < plo < 4.0 / 3.0  # the premise: clear of no flare, but 2 - 3 (2 - plo) is below 0
+    plain = intervals_from_draws(fit, d, 18, widening=1.0)
+    wide = intervals_from_draws(fit, d, 18, widening=3.0)
+    assert plain[("base_flare", "excess_mm")][1] == 2.0 == wide[("base_flare", "excess_mm")][1]  # the fit itself
+    assert wide[("base_flare", "excess_mm")][0] == 0.0  # 2 - 3 (2 - plo) < 0: cut at the bound, no flare
+    spec = fit.specs[0]
+    assert covers_null(spec, plain) == [] and covers_null(spec, wide) == ["excess_mm"]
+    llo, lhi = wide[("base_flare", "length_mm")]
+    ql, qh = np.percentile(np.log(d[:, 1]), [2.5, 97.5])
+    assert math.log(100.0 / llo) == pytest.approx(3.0 * (math.log(100.0) - ql), rel=1e-9)
+    assert math.log(lhi / 100.0) == pytest.approx(3.0 * (qh - math.log(100.0)), rel=1e-9)
+    # one cane: nothing to resample between canes, so nothing is excluded
+    lone = intervals_from_draws(fit, d, 1)
+    lo_box, hi_box = (b.tolist() for b in cand.box())
+    assert lone[("base_flare", "excess_mm")] == (lo_box[0], hi_box[0])
+    assert lone[("base_flare", "length_mm")] == pytest.approx((math.exp(lo_box[1]), math.exp(hi_box[1])))
+
+
+def test_bootstrap_ci_widens_for_the_number_of_canes_not_of_trials(bundled_trials):
+    """``bootstrap_ci`` is the percentile interval of its own draws widened for the canes resampled
+    (18 here, of 54 trials): the same draws widened for 54 would be narrower, for 2 far wider."""
+    from canebench.discovery.fit import Candidate, bootstrap_ci, bootstrap_draws, fit_candidate, intervals_from_draws
+    from canebench.discovery.screenset import Anchored
+
+    cfg, ss, lkb, canes, height, inv, rng, noise, truth = _scaled_bundled_screen(bundled_trials)
+    at = Anchored(ss, lkb)
+    lkf = at.predict(truth) + noise
+    assert (len(np.unique(canes)), len(lkb)) == (18, 54)
+    fit = fit_candidate(Candidate.of(("modulus_scale",)), at, lkf)
+    ci = bootstrap_ci(fit, at, lkf, n_boot=30, seed=4)
+    draws = bootstrap_draws(fit, at, lkf, n_boot=30, seed=4)
+    for g, same in ((18, True), (54, False), (2, False)):
+        assert (intervals_from_draws(fit, draws, g) == ci) is same, g
 
 
 def _scaled_bundled_screen(bundled_trials):
