@@ -463,21 +463,27 @@ def intervals_from_draws(fit: Fit, draws: np.ndarray, n_canes: int, fixed: tuple
     value = {(sp.name, k): v for sp in fit.specs[len(fixed):] for k, v in sp.params}
     w = small_sample_widening(n_canes) if widening is None else widening
     box_lo, box_hi = fit.candidate.box()
+    logs = [EFFECTS[n].parameters[p].log for n, p in fit.candidate.free]
+
+    def own_units(e: float, log: bool) -> float:
+        return float(math.exp(e) if log else e)
+
+    if not math.isfinite(w):  # no spread between canes to resample: every interval is the search range
+        return {key: (own_units(box_lo[j], log), own_units(box_hi[j], log))
+                for j, (key, log) in enumerate(zip(fit.candidate.free, logs))}
     out = {}
-    for j, (n, p) in enumerate(fit.candidate.free):
-        log = EFFECTS[n].parameters[p].log
+    for j, (key, log) in enumerate(zip(fit.candidate.free, logs)):
         col = np.log(draws[:, j]) if log else draws[:, j]
-        v = value[(n, p)]
+        v = value[key]
         x = math.log(v) if log else v
         ends = []
-        for q, bound, side in ((2.5, box_lo[j], -1.0), (97.5, box_hi[j], 1.0)):
+        for q, side in ((2.5, -1.0), (97.5, 1.0)):
             dist = max(side * (np.percentile(col, q) - x), 0.0)
-            if dist == 0.0 and math.isfinite(w):
-                ends.append(v)  # exactly the fit (not exp(log v), which may miss it by a rounding)
-                continue
-            e = bound if not math.isfinite(w) else min(max(x + side * w * dist, box_lo[j]), box_hi[j])
-            ends.append(math.exp(e) if log else e)
-        out[(n, p)] = (float(ends[0]), float(ends[1]))
+            if dist == 0.0:
+                ends.append(float(v))  # exactly the fit (not exp(log v), which may miss it by a rounding)
+            else:
+                ends.append(own_units(min(max(x + side * w * dist, box_lo[j]), box_hi[j]), log))
+        out[key] = (ends[0], ends[1])
     return out
 
 

@@ -34,7 +34,8 @@
    refitted) changes the model by less than :data:`.selection.MIN_CHANGE`: an effect
    named early can go stale once a later one explains its share. No forward
    step returns to a model already held, so the search terminates. Then an
-   effect whose 95 % cane-bootstrap interval reaches its no-effect value (a
+   effect whose 95 % cane-bootstrap interval (widened for the number of canes,
+   :func:`.fit.small_sample_widening`) reaches its no-effect value (a
    parameter with ``switches_off``: a scale of 1, a pitch of 0, a spring at its
    stiffest bound, no flare) is not named (``unsupported``; one at a time,
    with a partner it entered beside as a pair, :func:`.selection.drop_unsupported`),
@@ -68,9 +69,9 @@
    something significant, and the same level trend against a plain cane
    permutation (:func:`.structure.level_trend`), which ignores the shared
    geometry error and so flags more often than its level.
-6. The fitted model (95 % cane-bootstrap intervals) as a model file; the
-   baseline and the chosen backends re-run with it; before and after, out of
-   sample.
+6. The fitted model (95 % cane-bootstrap intervals, widened for the number of
+   canes) as a model file; the baseline and the chosen backends re-run with it;
+   before and after, out of sample.
 
 Where each stage lives: step 2 in :mod:`.contacts`, step 4 in :mod:`.selection` (with the no-effect values in
 :mod:`.nulls`), step 5 in :mod:`.verdict`, every engine run after the baseline's in
