@@ -468,7 +468,7 @@ def intervals_from_draws(fit: Fit, draws: np.ndarray, n_canes: int, fixed: tuple
     def own_units(e: float, log: bool) -> float:
         return float(math.exp(e) if log else e)
 
-    if not math.isfinite(w):  # no spread between canes to resample: every interval is the search range
+    if not math.isfinite(w):  # fewer than two canes (no spread between them to resample): the search range
         return {key: (own_units(box_lo[j], log), own_units(box_hi[j], log))
                 for j, (key, log) in enumerate(zip(fit.candidate.free, logs))}
     out = {}
