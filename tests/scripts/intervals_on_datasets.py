@@ -8,9 +8,9 @@ generator's dataset (run with ``canebench discover``'s defaults, 100 resamples a
 without the confirmation, which comes after the intervals). Each case runs
 :func:`canebench.discovery.workflow.discover` serially in one of ``--workers`` processes, its
 output under ``OUT/<case>``, with the final model's bootstrap call recorded (its interval is the
-workflow's: a percentile interval, widened about the fit for the number of canes since session 57). Where that model is
-one global effect with one parameter that keeps the diameters (a modulus scale, root or rig
-spring, or probe pitch), the likelihood-ratio intervals of ``interval_coverage.py``
+workflow's: a percentile interval, widened about the fit for the number of canes since session
+57). Where that model is one global effect with one parameter that keeps the diameters (a
+modulus scale, root or rig spring, or probe pitch), the likelihood-ratio intervals of ``interval_coverage.py``
 (:func:`lr_intervals`, cut at chi-square(1)'s and F(1, G - 1)'s 95 % quantiles) are computed
 from the same fit, screen and data, and each interval is scored against the truth's value.
 
