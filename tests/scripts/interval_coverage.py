@@ -18,6 +18,10 @@ Three intervals come from the same draws: the plain percentile interval (``lo``,
 widened about the fit for G canes by t(0.975, G - 1) / z(0.975) * sqrt(G / (G - 1)), in the fit's
 coordinate, log for a log parameter; 1.11 at 18 canes; ``widened_covers``). Session 47 scored
 that widening in the parameter's own units; the workflow widens in the fit's coordinate.
+Two standard-error intervals, for comparison (session 59): the fit -/+ t(0.975, G - 1) times the
+draws' sd, widened by sqrt(G / (G - 1)) (``se_covers``), and times the leave-one-cane-out
+jackknife's standard error (``jack_covers``, G more refits); the row also keeps the draws
+(``draws``, space-separated) so that other intervals can be scored from the CSV.
 Two more need no resampling: the likelihood-ratio interval of the fit's own objective
 (:func:`lr_intervals`), cut at the chi-square's 95 % quantile (3.84) and at F(1, G - 1)'s (4.45
 at 18 canes: Student's t squared, since the cane offsets' variance is estimated from G canes).
@@ -35,6 +39,7 @@ a miss there can be the model's bias, which no resampling of canes can show.
 """
 import argparse
 import functools
+import math
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -123,12 +128,40 @@ def print_lr_summary(df: pd.DataFrame, base: str = "the percentile interval's") 
         print(f"  median width against {base}, {col}: {((df[hi] - df[lo]) / width).median():.3f}")
 
 
+def sd_interval(x_fit: float, sd: float, n_canes: int, log: bool, widen: bool) -> tuple[float, float]:
+    """The fit -/+ t(0.975, G - 1) x ``sd`` in the fit's coordinate (log for a log parameter), in the
+    parameter's units; ``widen`` also multiplies by sqrt(G / (G - 1)), the share of the variance a cane
+    bootstrap leaves out (a jackknife's variance already carries (G - 1) / G)."""
+    half = stats.t.ppf(0.975, n_canes - 1) * sd * (math.sqrt(n_canes / (n_canes - 1)) if widen else 1.0)
+    ends = (x_fit - half, x_fit + half)
+    return tuple(float(math.exp(e)) if log else float(e) for e in ends)
+
+
+def widened_t_sd(n_canes: int) -> float:
+    """The sd that (fit - truth) / the bootstrap's sd would have if the workflow's widening were exact:
+    Student's t with G - 1 degrees of freedom, times sqrt(G / (G - 1))."""
+    dof = n_canes - 1
+    return math.sqrt(dof / (dof - 2)) * math.sqrt(n_canes / dof)
+
+
+def jackknife_se(fit, at, lkf: np.ndarray) -> float:
+    """The leave-one-cane-out jackknife's standard error of a one-parameter fit, in its coordinate:
+    sqrt((G - 1) / G x sum of squared deviations of the G refits from their mean), each refit
+    started from the fit's value as :func:`~canebench.discovery.fit.bootstrap_draws` starts its own."""
+    from canebench.discovery.fit import fit_candidate
+
+    canes = np.unique(at.screen.canes)
+    xs = np.array([fit_candidate(fit.candidate, at.take(rows), lkf[rows], x0=fit.x).x[0]
+                   for rows in (np.flatnonzero(at.screen.canes != c) for c in canes)])
+    return float(math.sqrt((len(canes) - 1) / len(canes) * ((xs - xs.mean()) ** 2).sum()))
+
+
 def one(job: tuple[str, int, int, int]) -> dict:
     from canebench.canes.generate_hidden import MODULUS_LOG_SD, random_strength
     from canebench.discovery.fit import Candidate, bootstrap_draws, fit_candidate, intervals_from_draws
     from canebench.discovery.screenset import Anchored
     from canebench.discovery.selftest import COMPARED
-    from canebench.model.effects import EffectSpec
+    from canebench.model.effects import EFFECTS, EffectSpec
 
     ss, lkb = _screen()
     at = Anchored(ss, lkb)
@@ -145,12 +178,24 @@ def one(job: tuple[str, int, int, int]) -> dict:
     lo, hi = (float(v) for v in np.percentile(draws[:, 0], [2.5, 97.5]))  # the plain percentile interval
     blo, bhi = 2 * value - hi, 2 * value - lo
     wlo, whi = intervals_from_draws(fit, draws, len(canes))[(name, lib_param)]  # the workflow's
+    # two standard-error intervals, for comparison: the bootstrap draws' sd (steadier than two tail
+    # percentiles) and the leave-one-cane-out jackknife's (the usual remedy for few clusters)
+    log = EFFECTS[name].parameters[lib_param].log
+    x_fit, x_truth = (math.log(value), math.log(truth)) if log else (value, truth)
+    boot_sd = float(np.std(np.log(draws[:, 0]) if log else draws[:, 0], ddof=1))
+    jack_se = jackknife_se(fit, at, lkf)
+    slo, shi = sd_interval(x_fit, boot_sd, len(canes), log, widen=True)
+    jlo, jhi = sd_interval(x_fit, jack_se, len(canes), log, widen=False)
     # likelihood-ratio intervals: the chi-square's quantile, and F(1, G - 1)'s (Student's t squared:
     # the cane offsets' variance is estimated from G canes, as a between-cane effect's is)
     (llo, lhi), (flo, fhi) = lr_intervals(fit, at, lkf, stats.chi2.ppf(0.95, 1), stats.f.ppf(0.95, 1, len(canes) - 1))
     return {"effect": name, "rep": rep, "seed": seed, "n_boot": n_boot, "truth": truth, "fit": value, "lo": lo, "hi": hi,
             "rel_err": abs(value / truth - 1), "covers": lo <= truth <= hi, "basic_covers": blo <= truth <= bhi,
             "wf_lo": wlo, "wf_hi": whi, "widened_covers": wlo <= truth <= whi,
+            "x_fit": x_fit, "x_truth": x_truth, "boot_sd": boot_sd, "jack_se": jack_se,
+            "se_lo": slo, "se_hi": shi, "se_covers": slo <= truth <= shi,
+            "jack_lo": jlo, "jack_hi": jhi, "jack_covers": jlo <= truth <= jhi,
+            "draws": " ".join(f"{d:.17g}" for d in draws[:, 0]),  # so other intervals can be scored from the CSV
             "lr_lo": llo, "lr_hi": lhi, "lr_covers": llo <= truth <= lhi,
             "lrf_lo": flo, "lrf_hi": fhi, "lrf_covers": flo <= truth <= fhi,
             "truth_above": truth > hi, "truth_below": truth < lo}
@@ -205,14 +250,21 @@ def main(argv: list[str]) -> None:
     df = pd.DataFrame(rows)
     df.to_csv(a.out, index=False)
     by = df.groupby("effect").agg(n=("covers", "size"), covered=("covers", "sum"), basic=("basic_covers", "sum"),
-                                  widened=("widened_covers", "sum"), lr=("lr_covers", "sum"),
+                                  widened=("widened_covers", "sum"), se=("se_covers", "sum"),
+                                  jack=("jack_covers", "sum"), lr=("lr_covers", "sum"),
                                   lr_f=("lrf_covers", "sum"),
                                   above=("truth_above", "sum"), below=("truth_below", "sum"),
                                   median_err=("rel_err", "median"), max_err=("rel_err", "max"))
     print(by.to_string())
     print(f"all: percentile {int(df.covers.sum())}/{len(df)} ({df.covers.mean():.1%}), "
           f"basic {int(df.basic_covers.sum())}/{len(df)} ({df.basic_covers.mean():.1%}), "
-          f"the workflow's (widened) {int(df.widened_covers.sum())}/{len(df)} ({df.widened_covers.mean():.1%})")
+          f"the workflow's (widened) {int(df.widened_covers.sum())}/{len(df)} ({df.widened_covers.mean():.1%}), "
+          f"the draws' sd {int(df.se_covers.sum())}/{len(df)} ({df.se_covers.mean():.1%}), "
+          f"the jackknife's {int(df.jack_covers.sum())}/{len(df)} ({df.jack_covers.mean():.1%})")
+    z = (df.x_fit - df.x_truth) / df.boot_sd
+    print(f"  (fit - truth) / the draws' sd: sd {z.std():.3f} (Student's t({len(np.unique(_screen()[0].canes)) - 1}) "
+          f"widened as the workflow widens: {widened_t_sd(len(np.unique(_screen()[0].canes))):.3f}); "
+          f"/ the jackknife's: sd {((df.x_fit - df.x_truth) / df.jack_se).std():.3f}")
     print_lr_summary(df)
 
 
