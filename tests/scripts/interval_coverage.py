@@ -1,7 +1,7 @@
 """How often the workflow's 95 % cane-bootstrap interval covers a hidden parameter, in the model.
 
 Run from the repository: ``python tests/scripts/interval_coverage.py OUT.csv [--reps 25] [--seed 1]
-[--workers 2] [--n-boot 100]``. On the bundled geometry's screen (the beam-consistent preset),
+[--workers 2] [--n-boot 100]``, or ``... --summary CSV [CSV ...]``. On the bundled geometry's screen (the beam-consistent preset),
 each of the four compared effects is hidden
 ``--reps`` times, at the self-test's strengths (``random_strength``, one in each fifth of the range
 in turn), under per-cane scatter of ``MODULUS_LOG_SD`` (0.15 in ln, the self-test's) and per-trial
@@ -12,21 +12,22 @@ prediction (``Anchored.predict``) plus normal scatter of the kind the fit's like
 resamples, as ``canebench discover`` by default; the self-test draws 40). The resamples are
 seeded by the replicate's number alone, so the four effects share them at a replicate (their
 data differ). One row per replicate: truth, fit, intervals, and whether each covers the truth.
-Three intervals come from the same draws: the plain percentile interval (``lo``, ``hi``,
+Four intervals come from the same draws: the plain percentile interval (``lo``, ``hi``,
 ``covers``: the workflow's until it was widened), the "basic" interval (reflected about the fit:
-2 fit - hi, 2 fit - lo), and the workflow's own (``intervals_from_draws``: the percentile interval
+2 fit - hi, 2 fit - lo), the workflow's own (``intervals_from_draws``: the percentile interval
 widened about the fit for G canes by t(0.975, G - 1) / z(0.975) * sqrt(G / (G - 1)), in the fit's
-coordinate, log for a log parameter; 1.11 at 18 canes; ``widened_covers``). Session 47 scored
-that widening in the parameter's own units; the workflow widens in the fit's coordinate.
-Two standard-error intervals, for comparison (session 59): the fit -/+ t(0.975, G - 1) times the
-draws' sd, widened by sqrt(G / (G - 1)) (``se_covers``), and times the leave-one-cane-out
-jackknife's standard error (``jack_covers``, G more refits); the row also keeps the draws
-(``draws``, space-separated) so that other intervals can be scored from the CSV.
+coordinate, log for a log parameter; 1.11 at 18 canes; ``widened_covers``; session 47 scored
+that widening in the parameter's own units, the workflow widens in the fit's coordinate), and,
+for comparison (session 59), the fit -/+ t(0.975, G - 1) times the draws' sd times sqrt(G / (G - 1))
+in the fit's coordinate (``se_covers``). A fifth takes G more refits: the fit -/+ t(0.975, G - 1)
+times the leave-one-cane-out jackknife's standard error (``jack_covers``). The row also keeps the
+draws (``draws``, space-separated), so that other intervals can be scored from the CSV.
 Two more need no resampling: the likelihood-ratio interval of the fit's own objective
 (:func:`lr_intervals`), cut at the chi-square's 95 % quantile (3.84) and at F(1, G - 1)'s (4.45
 at 18 canes: Student's t squared, since the cane offsets' variance is estimated from G canes).
-The summary prints coverage per effect and overall, and each interval's median width against
-the percentile interval's.
+The summary prints coverage per effect and overall, the spread of (fit - truth) over each
+standard error, and each interval's median width against the percentile interval's.
+``--summary CSV [CSV ...]`` prints that summary again from stored CSVs, pooled, without refitting.
 
 ``--spread EFFECT:PARAM:VALUE [--reps N]`` instead compares spreads at one strength: the fitted
 parameter's (in the fit's own coordinate) over N datasets, against the bootstrap's within each
@@ -124,6 +125,9 @@ def print_lr_summary(df: pd.DataFrame, base: str = "the percentile interval's") 
     cols = {"likelihood ratio": ("lr_lo", "lr_hi"), "F(1, G-1)": ("lrf_lo", "lrf_hi")}
     if "wf_lo" in df:  # the workflow's own, widened, interval (rows written since it was widened)
         cols["the workflow's (widened)"] = ("wf_lo", "wf_hi")
+    if "jack_lo" in df:  # the standard-error intervals (rows written since session 59)
+        cols["the draws' sd"] = ("se_lo", "se_hi")
+        cols["the jackknife's"] = ("jack_lo", "jack_hi")
     for col, (lo, hi) in cols.items():
         print(f"  median width against {base}, {col}: {((df[hi] - df[lo]) / width).median():.3f}")
 
@@ -141,6 +145,8 @@ def widened_t_sd(n_canes: int) -> float:
     """The sd that (fit - truth) / the bootstrap's sd would have if the workflow's widening were exact:
     Student's t with G - 1 degrees of freedom, times sqrt(G / (G - 1))."""
     dof = n_canes - 1
+    if dof <= 2:  # Student's t has no finite variance there
+        return math.inf
     return math.sqrt(dof / (dof - 2)) * math.sqrt(n_canes / dof)
 
 
@@ -192,7 +198,7 @@ def one(job: tuple[str, int, int, int]) -> dict:
     return {"effect": name, "rep": rep, "seed": seed, "n_boot": n_boot, "truth": truth, "fit": value, "lo": lo, "hi": hi,
             "rel_err": abs(value / truth - 1), "covers": lo <= truth <= hi, "basic_covers": blo <= truth <= bhi,
             "wf_lo": wlo, "wf_hi": whi, "widened_covers": wlo <= truth <= whi,
-            "x_fit": x_fit, "x_truth": x_truth, "boot_sd": boot_sd, "jack_se": jack_se,
+            "n_canes": len(canes), "x_fit": x_fit, "x_truth": x_truth, "boot_sd": boot_sd, "jack_se": jack_se,
             "se_lo": slo, "se_hi": shi, "se_covers": slo <= truth <= shi,
             "jack_lo": jlo, "jack_hi": jhi, "jack_covers": jlo <= truth <= jhi,
             "draws": " ".join(f"{d:.17g}" for d in draws[:, 0]),  # so other intervals can be scored from the CSV
@@ -233,13 +239,19 @@ def main(argv: list[str]) -> None:
     from canebench.discovery.selftest import COMPARED
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", type=Path)
+    ap.add_argument("out", type=Path, nargs="?")
     ap.add_argument("--reps", type=int, default=25)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--n-boot", type=int, default=100)
     ap.add_argument("--spread", metavar="EFFECT:PARAM:VALUE")
+    ap.add_argument("--summary", nargs="+", type=Path, metavar="CSV", help="print the summary of stored CSVs, pooled")
     a = ap.parse_args(argv)
+    if a.summary:
+        print_summary(pd.concat([pd.read_csv(p) for p in a.summary], ignore_index=True))
+        return
+    if a.out is None and not a.spread:
+        ap.error("OUT is required unless --summary or --spread is given")
     if a.spread:
         name, param, value = a.spread.split(":")
         spread(name, param, float(value), a.reps, a.n_boot)
@@ -249,6 +261,12 @@ def main(argv: list[str]) -> None:
         rows = list(pool.map(one, jobs))
     df = pd.DataFrame(rows)
     df.to_csv(a.out, index=False)
+    print_summary(df)
+
+
+def print_summary(df: pd.DataFrame) -> None:
+    """Coverage per effect and overall, the spreads of (fit - truth) over each standard error, and
+    the intervals' widths (:func:`print_lr_summary`)."""
     by = df.groupby("effect").agg(n=("covers", "size"), covered=("covers", "sum"), basic=("basic_covers", "sum"),
                                   widened=("widened_covers", "sum"), se=("se_covers", "sum"),
                                   jack=("jack_covers", "sum"), lr=("lr_covers", "sum"),
@@ -261,12 +279,13 @@ def main(argv: list[str]) -> None:
           f"the workflow's (widened) {int(df.widened_covers.sum())}/{len(df)} ({df.widened_covers.mean():.1%}), "
           f"the draws' sd {int(df.se_covers.sum())}/{len(df)} ({df.se_covers.mean():.1%}), "
           f"the jackknife's {int(df.jack_covers.sum())}/{len(df)} ({df.jack_covers.mean():.1%})")
-    z = (df.x_fit - df.x_truth) / df.boot_sd
-    print(f"  (fit - truth) / the draws' sd: sd {z.std():.3f} (Student's t({len(np.unique(_screen()[0].canes)) - 1}) "
-          f"widened as the workflow widens: {widened_t_sd(len(np.unique(_screen()[0].canes))):.3f}); "
-          f"/ the jackknife's: sd {((df.x_fit - df.x_truth) / df.jack_se).std():.3f}")
+    # rows written before the column was added (65a8af3) are all on the bundled screen
+    (g,) = df.n_canes.unique() if "n_canes" in df else (len(np.unique(_screen()[0].canes)),)
+    print(f"  sd of (fit - truth) / the draws' sd: {((df.x_fit - df.x_truth) / df.boot_sd).std():.3f} "
+          f"(Student's t({g - 1}) times sqrt({g}/{g - 1}), if the widening were exact: {widened_t_sd(g):.3f}); "
+          f"/ the jackknife's: {((df.x_fit - df.x_truth) / df.jack_se).std():.3f} "
+          f"(Student's t({g - 1}): {widened_t_sd(g) * math.sqrt((g - 1) / g):.3f})")
     print_lr_summary(df)
-
 
 if __name__ == "__main__":
     main(sys.argv[1:])
