@@ -71,7 +71,7 @@ def figures(out: str | Path) -> list[Path]:
 
 def section(folder: str | Path) -> str:
     """HTML section for a folder holding ``discovery.json`` (empty string if none)."""
-    from canebench.discovery.checks_text import adequacy_lines, rivals_text
+    from canebench.discovery.checks_text import adequacy_lines, change_text, rivals_text
     from canebench.discovery.verdict import UNEXPLAINED_WHY
 
     folder = Path(folder)
@@ -85,6 +85,8 @@ def section(folder: str | Path) -> str:
     for n in doc["named"] + partial:
         ps = "; ".join(f"{k} = {v:.4g} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}] {n.get('units', {}).get(k, '')}"
                        if k in n.get("ci95", {}) else f"{k} = {v:.4g}" for k, v in n["params"].items())
+        if change_text(n):
+            ps += f"; alone: {change_text(n)}"
         if n["effect"] == "obstruction":
             ps = f"{n.get('n_trials', len(n.get('local', {})))} trial(s): " + ", ".join(
                 f"{t} at {v['onset_mm']:.1f} mm" + (" (soft contact before it: left out)" if v.get("excluded") else "")

@@ -542,6 +542,8 @@ def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root
     assert named["root_compliance"]["params"]["k_root"] == pytest.approx(15.0, rel=0.2)
     lo, hi = named["root_compliance"]["ci95"]["k_root"]
     assert lo < named["root_compliance"]["params"]["k_root"] < hi
+    # a root spring only softens, and the report says by how much
+    assert named["root_compliance"]["ln_k_change"]["max"] < 0
     g = doc["gap"]
     assert g["after_cv"]["median_abs_log_ratio"] < 0.5 * g["before"]["median_abs_log_ratio"]
     # every engine re-run with the fitted model agrees with the screen's prediction
@@ -560,12 +562,41 @@ def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root
     assert [e.name for e in cfg.effects] == ["root_compliance"]
     report = (out / "report.html").read_text()
     assert report.count("Discovery") >= 1
+    assert "alone: ln k -" in report
     # the report lists every adequacy check the result holds, in the words the CLI prints
     from canebench.discovery.checks_text import adequacy_lines
 
     lines = adequacy_lines(doc)
     assert len(lines) >= 4 and all(html.escape(line) in report for line in lines)
     assert len(res.to_df()) == 54
+
+
+def test_a_named_effect_says_what_it_alone_changes_ln_k_by(bundled_trials):
+    """Each named entry carries ``ln_k_change``: what the effect alone changes ln k by on the scored
+    trials, through the screen (anchored elsewhere, as after a re-anchoring). A modulus scale s
+    changes every trial's stiffness by ln s exactly (the rig's series part is not in the model); a
+    root spring only softens and a flare only stiffens. The CLI and the report print it."""
+    from canebench.discovery.checks_text import change_text
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import Anchored, ScreenSet
+    from canebench.discovery.workflow import _named_entries
+    from canebench.model.effects import EffectSpec
+    from canebench.model.presets import PRESETS
+
+    ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in bundled_trials[:9]])
+    lkb = np.log(np.linspace(0.01, 0.3, len(ss.trials)))
+    anchor = (EffectSpec.parse("root_compliance(k_root=20)"), EffectSpec.parse("rig_compliance(k_rig=300)"))
+    at = Anchored(ss.anchored(anchor), Anchored(ss, lkb).predict(anchor))
+    specs = [EffectSpec.parse(t) for t in ("modulus_scale(scale=1.5)", "root_compliance(k_root=20)",
+                                           "base_flare(excess_mm=6, length_mm=200)")]
+    scale, root, flare = (n["ln_k_change"] for n in _named_entries(specs, {}, at))
+    assert scale["min"] == pytest.approx(math.log(1.5), abs=1e-12)
+    assert scale["max"] == pytest.approx(math.log(1.5), abs=1e-12)
+    assert root["max"] < 0 and flare["min"] > 0
+    for c in (root, flare):
+        assert c["min"] <= c["median"] <= c["max"] and c["min"] < c["max"]
+    assert change_text({"ln_k_change": scale}) == "ln k +0.405 (median; +0.405 to +0.405)"
+    assert change_text({"params": {}}) == ""
 
 
 def test_an_interval_reaching_no_effect_covers_the_null():

@@ -93,7 +93,7 @@ def main(a: argparse.Namespace) -> int:
                   + (f" and {early} early contact(s), left out of the fit" if early else "") + ": "
                   + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" + _excluded_text(v) for t, v in n["local"].items()))
         else:
-            print(f"  {what}: {n['effect']} {_params_text(n)}{_rivals_text(n)}")
+            print(f"  {what}: {n['effect']} {_params_text(n)}{_change_text(n)}{_rivals_text(n)}")
     for u in doc.get("unsupported", []):
         print(f"  not named: {u['effect']} {_params_text(u)}"
               + (f" (its interval reaches no effect: {', '.join(u['covers_null'])})" if u["covers_null"] else "")
@@ -132,6 +132,14 @@ def _rivals_text(n: dict) -> str:
 
     r = rivals_text(n)
     return f" ({r})" if r else ""
+
+
+def _change_text(n: dict) -> str:
+    """``; alone: ln k +0.412 (median; ...)`` for an effect with ``ln_k_change``, else ``""``."""
+    from ..discovery.checks_text import change_text
+
+    c = change_text(n)
+    return f"; alone: {c}" if c else ""
 
 
 def _params_text(n: dict) -> str:

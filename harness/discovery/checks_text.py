@@ -27,6 +27,13 @@ def rivals_text(named: dict[str, Any]) -> str:
     return f"barely ahead of {r}" if r else ""
 
 
+def change_text(named: dict[str, Any]) -> str:
+    """``ln k +0.412 (median; +0.105 to +0.873)`` for an effect in ``discovery.json`` that carries
+    ``ln_k_change`` (what it alone changes ln k by on the scored trials), else ``""``."""
+    c = named.get("ln_k_change")
+    return f"ln k {c['median']:+.3f} (median; {c['min']:+.3f} to {c['max']:+.3f})" if c else ""
+
+
 def adequacy_lines(doc: dict[str, Any]) -> list[str]:
     """One sentence per adequacy check in ``doc["adequacy"]``, in the order the workflow runs them.
 

@@ -398,7 +398,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     feats = feats.merge(F[["trial", "r_before", "r_after_cv", "r_after_in", "log_k_model", "log_k_model_cv"]],
                         on="trial", how="left")
 
-    named = _named_entries(final.fit.specs, ci, at.screen)
+    named = _named_entries(final.fit.specs, ci, at)
     notes.extend(mark_close_calls(named, sel.close_calls))
     if obstruction or fc.early:
         named.append(_obstruction_entry(fc, unscored))
@@ -507,14 +507,24 @@ def _not_named_notes(unsupported: list[dict], stale: Iterable[str], too_small: d
     return notes
 
 
-def _named_entries(specs: Iterable[EffectSpec], ci: dict, screen: ScreenSet) -> list[dict[str, Any]]:
-    """``discovery.json``'s ``named`` entries of the global effects fitted, with their intervals and,
-    for an effect on the diameter, how much the calipers would have read differently."""
+def _named_entries(specs: Iterable[EffectSpec], ci: dict, at: Anchored) -> list[dict[str, Any]]:
+    """``discovery.json``'s ``named`` entries of the global effects fitted, with their intervals, what
+    each alone changes ln k by on the scored trials, and, for an effect on the diameter, how much the
+    calipers would have read differently."""
+    screen = at.screen
+    without = at.predict(())
     named = []
     for spec in specs:
         named.append({"effect": spec.name, "scope": "global", "params": dict(spec.params),
                       "ci95": ci_of(spec, ci),
                       "units": spec.units()})
+        # the effect's size in the quantity the data measure: a pair's parameters can trade off (a flare's
+        # excess against its length) where the stiffening they give together is well fixed by the data
+        change = at.predict((spec,)) - without
+        change = change[np.isfinite(change)]
+        if len(change):
+            named[-1]["ln_k_change"] = {"median": float(np.median(change)), "min": float(np.min(change)),
+                                        "max": float(np.max(change))}
         fx1 = AppliedEffects([spec.instance()])
         if fx1.changes_diameter and len(screen.cal_s):
             # what the calipers would have read differently (mm), against their own scatter

@@ -7,7 +7,10 @@ folder of an earlier ``canebench discover --selftest --out DIR`` run (it holds t
 the two documents are compared without ``timing_s`` (:func:`compare_discoveries.json_diff`). Nothing
 is written. Minutes per case (no engine confirmation, 40 resamples, one worker).
 
-Run: ``python tests/scripts/replay_selftest_cases.py CASE [CASE ...]``; exits 1 if any case differs.
+Run: ``python tests/scripts/replay_selftest_cases.py [--show] CASE [CASE ...]``; exits 1 if any case
+differs. ``--show`` also prints, per case, each global effect the new run names, its parameters and
+what it alone changes ln k by (``ln_k_change``), beside the generator's size of the hidden effect
+(the case row's ``size``: the median |change in ln k| it makes in the generator's own beam).
 """
 import json
 import sys
@@ -19,9 +22,12 @@ from compare_discoveries import json_diff, load_doc  # beside this script
 
 
 def main(cases: list[str]) -> int:
+    show = "--show" in cases
+    cases = [c for c in cases if c != "--show"]
     differs = 0
     for d in map(Path, cases):
-        seed = json.loads((d / "selftest_row.json").read_text())["case"]["seed"]
+        stored = json.loads((d / "selftest_row.json").read_text())
+        seed = stored["case"]["seed"]
         t0 = time.perf_counter()
         # through JSON as the suite wrote it, so both sides hold the same types
         new = json.loads(json.dumps(discover_case(d, seed).to_json(), default=float))
@@ -32,6 +38,13 @@ def main(cases: list[str]) -> int:
         print(f"{d}: {'identical' if not found else 'DIFFERS'} ({time.perf_counter() - t0:.0f} s)", flush=True)
         for kind, path in found[:20]:
             print(f"    {kind}: {path}")
+        if show:
+            print(f"    hidden: {stored['case']['effects']}; the generator's size (median |change in ln k|) {stored['row']['size']:.3f}")
+            for n in new["named"]:
+                if n["scope"] == "global":
+                    c = n.get("ln_k_change", {})
+                    print(f"    named: {n['effect']} {n['params']}; alone: ln k "
+                          + (f"{c['median']:+.3f} (median; {c['min']:+.3f} to {c['max']:+.3f})" if c else "-"))
     return 1 if differs else 0
 
 
