@@ -85,8 +85,8 @@ def section(folder: str | Path) -> str:
     for n in doc["named"] + partial:
         ps = "; ".join(f"{k} = {v:.4g} [{n['ci95'][k][0]:.4g}, {n['ci95'][k][1]:.4g}] {n.get('units', {}).get(k, '')}"
                        if k in n.get("ci95", {}) else f"{k} = {v:.4g}" for k, v in n["params"].items())
-        if change_text(n):
-            ps += f"; alone: {change_text(n)}"
+        if c := change_text(n):
+            ps += f"; alone: {c}"
         if n["effect"] == "obstruction":
             ps = f"{n.get('n_trials', len(n.get('local', {})))} trial(s): " + ", ".join(
                 f"{t} at {v['onset_mm']:.1f} mm" + (" (soft contact before it: left out)" if v.get("excluded") else "")

@@ -574,8 +574,10 @@ def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root
 def test_a_named_effect_says_what_it_alone_changes_ln_k_by(bundled_trials):
     """Each named entry carries ``ln_k_change``: what the effect alone changes ln k by on the scored
     trials, through the screen (anchored elsewhere, as after a re-anchoring). A modulus scale s
-    changes every trial's stiffness by ln s exactly (the rig's series part is not in the model); a
-    root spring only softens and a flare only stiffens. The CLI and the report print it."""
+    changes every trial's stiffness by ln s exactly (the model without effects has no series part);
+    a rig spring of k_rig N/m in series with a stiffness of k N/mm changes it by -ln(1 + 1e3 k / k_rig)
+    (the anchor's own rig spring taken out first); a root spring only softens and a flare only
+    stiffens. The CLI and the report print it."""
     from canebench.discovery.checks_text import change_text
     from canebench.discovery.screen import trial_geometry
     from canebench.discovery.screenset import Anchored, ScreenSet
@@ -588,10 +590,14 @@ def test_a_named_effect_says_what_it_alone_changes_ln_k_by(bundled_trials):
     anchor = (EffectSpec.parse("root_compliance(k_root=20)"), EffectSpec.parse("rig_compliance(k_rig=300)"))
     at = Anchored(ss.anchored(anchor), Anchored(ss, lkb).predict(anchor))
     specs = [EffectSpec.parse(t) for t in ("modulus_scale(scale=1.5)", "root_compliance(k_root=20)",
-                                           "base_flare(excess_mm=6, length_mm=200)")]
-    scale, root, flare = (n["ln_k_change"] for n in _named_entries(specs, {}, at))
+                                           "base_flare(excess_mm=6, length_mm=200)", "rig_compliance(k_rig=100)")]
+    scale, root, flare, rig = (n["ln_k_change"] for n in _named_entries(specs, {}, at))
     assert scale["min"] == pytest.approx(math.log(1.5), abs=1e-12)
     assert scale["max"] == pytest.approx(math.log(1.5), abs=1e-12)
+    # the screen without effects gives back lkb (the anchor's root and rig taken out), so in series:
+    rig_closed = -np.log1p(1e3 * np.exp(lkb) / 100.0)
+    for key, agg in (("median", np.median), ("min", np.min), ("max", np.max)):
+        assert rig[key] == pytest.approx(agg(rig_closed), abs=1e-12)
     assert root["max"] < 0 and flare["min"] > 0
     for c in (root, flare):
         assert c["min"] <= c["median"] <= c["max"] and c["min"] < c["max"]

@@ -518,8 +518,8 @@ def _named_entries(specs: Iterable[EffectSpec], ci: dict, at: Anchored) -> list[
         named.append({"effect": spec.name, "scope": "global", "params": dict(spec.params),
                       "ci95": ci_of(spec, ci),
                       "units": spec.units()})
-        # the effect's size in the quantity the data measure: a pair's parameters can trade off (a flare's
-        # excess against its length) where the stiffening they give together is well fixed by the data
+        # the effect's size in the quantity the data measure: an effect's two parameters can trade off (a
+        # flare's excess against its length) where the stiffening they give together is well fixed by the data
         change = at.predict((spec,)) - without
         change = change[np.isfinite(change)]
         if len(change):

@@ -43,8 +43,8 @@ def main(cases: list[str]) -> int:
             for n in new["named"]:
                 if n["scope"] == "global":
                     c = n.get("ln_k_change", {})
-                    print(f"    named: {n['effect']} {n['params']}; alone: ln k "
-                          + (f"{c['median']:+.3f} (median; {c['min']:+.3f} to {c['max']:+.3f})" if c else "-"))
+                    alone = f"{c['median']:+.3f} (median; {c['min']:+.3f} to {c['max']:+.3f})" if c else "-"
+                    print(f"    named: {n['effect']} {n['params']}; alone: ln k {alone}")
     return 1 if differs else 0
 
 
