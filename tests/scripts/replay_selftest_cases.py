@@ -17,6 +17,7 @@ import sys
 import time
 from pathlib import Path
 
+from canebench.discovery.checks_text import change_text
 from canebench.discovery.selftest import discover_case
 from compare_discoveries import json_diff, load_doc  # beside this script
 
@@ -42,9 +43,7 @@ def main(cases: list[str]) -> int:
             print(f"    hidden: {stored['case']['effects']}; the generator's size (median |change in ln k|) {stored['row']['size']:.3f}")
             for n in new["named"]:
                 if n["scope"] == "global":
-                    c = n.get("ln_k_change", {})
-                    alone = f"{c['median']:+.3f} (median; {c['min']:+.3f} to {c['max']:+.3f})" if c else "-"
-                    print(f"    named: {n['effect']} {n['params']}; alone: ln k {alone}")
+                    print(f"    named: {n['effect']} {n['params']}; alone: {change_text(n) or 'ln k -'}")
     return 1 if differs else 0
 
 
