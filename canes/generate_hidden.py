@@ -13,7 +13,8 @@ are implemented here, in the generator's own terms, not with the fitting
 code's effect classes:
 
 * ``modulus_scale``: every cane's true modulus times ``scale``;
-* ``root_compliance``: the rod's base is a rotational spring ``k_root``;
+* ``root_compliance``: the rod's base is a rotational spring ``k_root`` (with ``ln_sd``,
+  each cane's is ``k_root`` exp(``ln_sd`` z), z standard normal: a root per plant);
 * ``rig_compliance``: the rig records its own travel, cane deflection plus F / k_rig;
 * ``base_flare``: a root collar, d(s) (1 + a (1 - s / l)^2) for s < l (a
   polynomial collar, not the library's exponential);
@@ -173,6 +174,11 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
             if "modulus_scale" in effects:
                 E *= effects["modulus_scale"]["scale"]
             c_root = 1.0 / effects["root_compliance"]["k_root"] if "root_compliance" in effects else 0.0
+            if c_root and effects["root_compliance"].get("ln_sd"):
+                # each plant's root its own: k_root times exp(ln_sd z), z from a stream of the cane's
+                # own, so the dataset's other draws are those of the same seed without the spread
+                z = np.random.default_rng([seed, bush, cane]).normal()
+                c_root /= float(np.exp(effects["root_compliance"]["ln_sd"] * z))
 
             def rod_spec(E_s: float, d_s, c_s: float = 0.0) -> RodSpec:
                 """The cane's rod with modulus ``E_s``, diameter law ``d_s`` and root compliance ``c_s``."""
@@ -292,6 +298,8 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
             header = f"# {LABEL}\n# Units: SI (m, Pa, kg/m^3, N m s/rad). Spec: canes/README.md\n"
             (out / "canes" / f"{cid}.yaml").write_text(header + yaml.safe_dump(desc, sort_keys=False))
             truth["canes"][cid] = {"modulus_pa": E, "geometry": geo, "trials": tr_truth}
+            if c_root:
+                truth["canes"][cid]["k_root"] = 1.0 / c_root
     (out / "push_points.csv").write_text("\n".join(pp_rows) + "\n")
     (out / "truth" / "truth.json").write_text(json.dumps(truth, indent=1))
     return out

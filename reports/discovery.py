@@ -71,7 +71,7 @@ def figures(out: str | Path) -> list[Path]:
 
 def section(folder: str | Path) -> str:
     """HTML section for a folder holding ``discovery.json`` (empty string if none)."""
-    from canebench.discovery.checks_text import adequacy_lines, change_text, rivals_text
+    from canebench.discovery.checks_text import adequacy_lines, change_text, rivals_text, scope_text
     from canebench.discovery.verdict import UNEXPLAINED_WHY
 
     folder = Path(folder)
@@ -87,6 +87,8 @@ def section(folder: str | Path) -> str:
                        if k in n.get("ci95", {}) else f"{k} = {v:.4g}" for k, v in n["params"].items())
         if c := change_text(n):
             ps += f"; alone: {c}"
+        if c := scope_text(n):
+            ps += f"; {c}"
         if n["effect"] == "obstruction":
             ps = f"{n.get('n_trials', len(n.get('local', {})))} trial(s): " + ", ".join(
                 f"{t} at {v['onset_mm']:.1f} mm" + (" (soft contact before it: left out)" if v.get("excluded") else "")

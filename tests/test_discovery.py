@@ -544,6 +544,9 @@ def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root
     assert lo < named["root_compliance"]["params"]["k_root"] < hi
     # a root spring only softens, and the report says by how much
     assert named["root_compliance"]["ln_k_change"]["max"] < 0
+    # one root for every cane: tested for a value per cane, and kept global (the report says so)
+    assert named["root_compliance"]["scope"] == "global"
+    assert not named["root_compliance"]["per_cane_test"]["per_cane"]
     g = doc["gap"]
     assert g["after_cv"]["median_abs_log_ratio"] < 0.5 * g["before"]["median_abs_log_ratio"]
     # every engine re-run with the fitted model agrees with the screen's prediction
@@ -563,6 +566,7 @@ def test_discover_names_a_hidden_root_spring_and_writes_the_contract(hidden_root
     report = (out / "report.html").read_text()
     assert report.count("Discovery") >= 1
     assert "alone: ln k -" in report
+    assert "one value for all canes (per-cane test: p = " in report
     # the report lists every adequacy check the result holds, in the words the CLI prints
     from canebench.discovery.checks_text import adequacy_lines
 

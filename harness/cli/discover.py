@@ -93,16 +93,16 @@ def main(a: argparse.Namespace) -> int:
                   + (f" and {early} early contact(s), left out of the fit" if early else "") + ": "
                   + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" + _excluded_text(v) for t, v in n["local"].items()))
         else:
-            print(f"  {what}: {n['effect']} {_params_text(n)}{_change_text(n)}{_rivals_text(n)}")
+            print(f"  {what}: {n['effect']} {_params_text(n)}{_change_text(n)}{_scope_text(n)}{_rivals_text(n)}")
     for u in doc.get("unsupported", []):
         print(f"  not named: {u['effect']} {_params_text(u)}"
               + (f" (its interval reaches no effect: {', '.join(u['covers_null'])})" if u["covers_null"] else "")
               + (f" (entered beside {u['dropped_with']} as a pair)" if "dropped_with" in u else ""))
-    if doc.get("partial") and not any(n["scope"] == "global" for n in doc["named"]):
+    if doc.get("partial") and not any(n["scope"] != "per_trial" for n in doc["named"]):
         print(f"  named: nothing; the library's best account (partial, above) {INADEQUATE}")
-    elif doc.get("unsupported") and not any(n["scope"] == "global" for n in doc["named"]):
+    elif doc.get("unsupported") and not any(n["scope"] != "per_trial" for n in doc["named"]):
         print("  named: no global effect; what passed the selection did not pass its interval (above): unexplained")
-    elif doc.get("too_small_to_name") and not any(n["scope"] == "global" for n in doc["named"]):
+    elif doc.get("too_small_to_name") and not any(n["scope"] != "per_trial" for n in doc["named"]):
         ts = doc["too_small_to_name"]
         print(f"  named: nothing; the best fit, {ts['effect']} {_params_text(ts)}, is too small to name "
               f"(it changes the model by {ts['net_change_mean_abs']:.3g} in mean |ln k|): unexplained")
@@ -140,6 +140,14 @@ def _change_text(n: dict) -> str:
 
     c = change_text(n)
     return f"; alone: {c}" if c else ""
+
+
+def _scope_text(n: dict) -> str:
+    """``; per cane: ...`` or ``; one value for all canes ...`` for a tested effect, else ``""``."""
+    from ..discovery.checks_text import scope_text
+
+    c = scope_text(n)
+    return f"; {c}" if c else ""
 
 
 def _params_text(n: dict) -> str:

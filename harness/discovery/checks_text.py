@@ -34,6 +34,23 @@ def change_text(named: dict[str, Any]) -> str:
     return f"ln k {c['median']:+.3f} (median; {c['min']:+.3f} to {c['max']:+.3f})" if c else ""
 
 
+def scope_text(named: dict[str, Any]) -> str:
+    """What the per-cane test (:mod:`.per_cane`) found for an effect in ``discovery.json`` that carries
+    ``per_cane_test``: ``per cane: k_root 8.1 to 95 N m/rad over 18 canes (ln sd 0.74; p = 2e-05)``
+    or ``one value for all canes (per-cane test: p = 0.41)``; ``""`` where it was not tested."""
+    t = named.get("per_cane_test")
+    if not t:
+        return ""
+    if t["per_cane"]:
+        v = t["values"].values()
+        return (f"per cane: {t['parameter']} {min(v):.4g} to {max(v):.4g} {t['unit']} over {len(v)} canes "
+                f"(ln sd {t['ln_sd_between_canes']:.2f}; p = {t['p']:.2g})")
+    if t["p"] >= t["alpha"]:
+        return f"one value for all canes (per-cane test: p = {t['p']:.2g})"
+    return (f"one value for all canes (per-cane test: p = {t['p']:.2g}, but the canes' own values move ln k by "
+            f"{t['spread_mean_abs_ln_k']:.3f} only)")
+
+
 def adequacy_lines(doc: dict[str, Any]) -> list[str]:
     """One sentence per adequacy check in ``doc["adequacy"]``, in the order the workflow runs them.
 
@@ -120,11 +137,11 @@ def lookalike_notes(named: list[dict[str, Any]], partial: list[dict[str, Any]],
     scored push, along the cane from its base.
     """
     found = [(n, how, names) for names, how in ((named, "named,"), (partial, "fitted but withheld as partial,"))
-             for n in names if n["effect"] == "base_flare" and n["scope"] == "global"]
+             for n in names if n["effect"] == "base_flare" and n["scope"] != "per_trial"]
     if not found or not lowest_push_mm:
         return []
     flare, how, names = found[0]
-    root = any(n["effect"] == "root_compliance" and n["scope"] == "global" for n in names)
+    root = any(n["effect"] == "root_compliance" and n["scope"] != "per_trial" for n in names)
     lo, hi = min(lowest_push_mm), max(lowest_push_mm)
     where = f"{lo:.0f} mm" if round(lo) == round(hi) else f"{lo:.0f}-{hi:.0f} mm"
     length = flare["params"].get("length_mm")

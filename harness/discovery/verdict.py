@@ -166,8 +166,8 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
                    or bool(unsupported))
     partial: list[dict[str, Any]] = []
     if adequacy["inadequate"]:
-        partial = [n for n in named if n["scope"] == "global"]
-        named = [n for n in named if n["scope"] != "global"]
+        partial = [n for n in named if n["scope"] != "per_trial"]
+        named = [n for n in named if n["scope"] == "per_trial"]
         what = ", ".join(n["effect"] for n in partial) or "the baseline"
         why = failure_reasons(adequacy)
         notes.append(f"the model ({what}) " + "; and it ".join(why) + ": an effect outside the library, or one the "

@@ -69,13 +69,18 @@
    something significant, and the same level trend against a plain cane
    permutation (:func:`.structure.level_trend`), which ignores the shared
    geometry error and so flags more often than its level.
-6. The fitted model (95 % cane-bootstrap intervals, widened for the number of
-   canes) as a model file; the baseline and the chosen backends re-run with it;
-   before and after, out of sample.
+6. Each named effect that may be a cane's own (a root, a collar) is tested for a
+   value per cane (:mod:`.per_cane`: a hierarchy with one parameter more, its
+   spread between canes tested by the likelihood ratio at
+   :data:`.per_cane.PER_CANE_ALPHA`); a per-cane one carries each cane's value.
+7. The fitted model (95 % cane-bootstrap intervals, widened for the number of
+   canes; per-cane values where step 6 found them) as a model file; the baseline
+   and the chosen backends re-run with its global values; before and after, out
+   of sample.
 
 Where each stage lives: step 2 in :mod:`.contacts`, step 4 in :mod:`.selection` (with the no-effect values in
 :mod:`.nulls`), step 5 in :mod:`.verdict`, every engine run after the baseline's in
-:mod:`.engine_runs`; this module wires them together and writes the outputs.
+:mod:`.engine_runs`, step 6 in :mod:`.per_cane`; this module wires them together and writes the outputs.
 """
 
 from __future__ import annotations
@@ -103,6 +108,7 @@ from .checks_text import lookalike_notes
 from .contacts import FieldContacts, read_contacts
 from .fit import bootstrap_ci
 from .nulls import ci_of
+from .per_cane import PER_CANE_ALPHA, PerCaneTest, per_cane_test
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, drop_unsupported, forward_select
 from .structure import between_share
@@ -414,6 +420,12 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     named, partial, adequacy = verdict.named, verdict.partial, verdict.adequacy
     notes.extend(lookalike_notes(named, partial, list(1e3 * F.groupby("cane").s_push_m.min().dropna())))
     fitted = tuple(final.fit.specs)
+    # -- per-cane scope of the named effects that may be each cane's own (a root, a collar)
+    t_pc = time.perf_counter()
+    per_cane = scope_per_cane(named, final.fit, at, lkf, min_change, cfg0.diameter_factor, seed)
+    if per_cane:
+        notes.append(per_cane_note(per_cane))
+    timing["per_cane_s"] = time.perf_counter() - t_pc
     gap = {"before": _gap(r_before), "after_cv": _gap(r_after), "after_in_sample": _gap(F.r_after_in.to_numpy())}
     partial_config = None
     if partial:
@@ -424,6 +436,10 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         partial_config = cfg0.replace(effects=fitted + obstruction)
         fitted = ()
     model = cfg0.replace(effects=fitted + obstruction)
+    # the model file carries each cane's own value where the scope is per cane; the engines confirm
+    # the global fit, the one the gap out of sample is of (a held-out cane has no value of its own)
+    model_file = cfg0.replace(effects=tuple(per_cane[s.name].spec(s) if s.name in per_cane else s
+                                            for s in fitted) + obstruction)
 
     # -- confirm on the engines
     engines = pd.DataFrame()
@@ -444,7 +460,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     timing["total_s"] = time.perf_counter() - t_start
     # the best account of what the residual leans toward was too small to name: it stays unexplained
     result = DiscoveryResult(baseline, named, verdict.unexplained or sel.too_small is not None, gap, feats,
-                             pd.DataFrame(steps), verdict.structure_before, verdict.structure_after, model, engines,
+                             pd.DataFrame(steps), verdict.structure_before, verdict.structure_after, model_file,
+                             engines,
                              stop, notes, timing, anchors, adequacy, partial, partial_config,
                              pitch_table, unsupported, sel.too_small)
     result.notes.append(f"baseline: {base_text}")
@@ -531,6 +548,40 @@ def _named_entries(specs: Iterable[EffectSpec], ci: dict, at: Anchored) -> list[
             named[-1]["at_calipers_mm"] = {"max": 1e3 * float(np.max(np.abs(screen.caliper_change(fx1)))),
                                            "caliper_scatter": 1e3 * screen.cal_sigma}
     return named
+
+
+def scope_per_cane(named: list[dict[str, Any]], fit: Any, at: Anchored, log_k_field: np.ndarray,
+                   min_change: float, diameter_factor: float, seed: int,
+                   alpha: float = PER_CANE_ALPHA) -> dict[str, PerCaneTest]:
+    """Test each named effect that may be each cane's own for a value per cane (:mod:`.per_cane`),
+    at ``alpha`` split over the effects tested; a per-cane one gets ``scope`` ``per_cane`` and its
+    canes' values (``local``) in place. Every tested entry carries ``per_cane_test``."""
+    from .per_cane import varying_parameter
+
+    tested = [n for n in named if n["scope"] == "global" and varying_parameter(n["effect"])]
+    out: dict[str, PerCaneTest] = {}
+    for n in tested:
+        t = per_cane_test(at, log_k_field, tuple(fit.specs), n["effect"], alpha / len(tested), min_change,
+                          diameter_factor, fit.s2, fit.t2, seed)
+        if t is None:
+            continue
+        d = t.to_dict()
+        if not t.per_cane:  # shrunk toward the median, the canes' values say nothing a reader needs
+            d.pop("values"), d.pop("ln_sd_each")
+        n["per_cane_test"] = d
+        if t.per_cane:
+            n["scope"] = "per_cane"
+            n["local"] = {c: {t.parameter: v} for c, v in t.values.items()}
+            out[n["effect"]] = t
+    return out
+
+
+def per_cane_note(per_cane: Mapping[str, PerCaneTest]) -> str:
+    """The note on the effects whose value differs between canes."""
+    return "; ".join(
+        f"{t.effect}: {t.reason}; each cane's {t.parameter} ({min(t.values.values()):.4g} to "
+        f"{max(t.values.values()):.4g} {t.unit}) is in model.yaml (local), the global value for a cane not in "
+        f"the data; the engines and the gap out of sample are the global fit's" for t in per_cane.values())
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:

@@ -94,7 +94,9 @@ class Effect:
     #: where it acts: material, geometry, base, probe, measurement, trial
     where: ClassVar[str] = ""
     parameters: ClassVar[dict[str, Parameter]] = {}
-    #: scopes the discovery workflow may fit: global, per_cane, per_trial
+    #: scopes the discovery workflow may fit: global, per_cane, per_trial. With ``per_cane``, the
+    #: workflow tests whether the first parameter that switches the effect off differs between canes
+    #: (:mod:`canebench.discovery.per_cane`; a modulus scale per cane is each fit's random level)
     scopes: ClassVar[tuple[str, ...]] = ("global",)
 
     def __init__(self, **params: float) -> None:
@@ -165,6 +167,8 @@ class RootCompliance(Effect):
     where = "base"
     parameters = {"k_root": Parameter("N m/rad", 0.3, 3000.0, math.inf, True,
                                       "rotational stiffness of the root about each bending axis")}
+    #: a root is its plant's and its soil's: discovery asks whether k_root differs between canes
+    scopes = ("global", "per_cane")
 
     def root_compliance(self) -> float:
         return 1.0 / self.p["k_root"]
@@ -196,6 +200,8 @@ class BaseFlare(Effect):
     parameters = {"excess_mm": Parameter("mm", 0.0, 25.0, 0.0, False, "extra diameter at the ground", minimum=0.0),
                   "length_mm": Parameter("mm", 20.0, 600.0, 150.0, True, "e-folding length of the excess",
                                           switches_off=False)}
+    #: a collar is its cane's: discovery asks whether the excess differs between canes
+    scopes = ("global", "per_cane")
 
     def diameter(self, s: np.ndarray, d: np.ndarray) -> np.ndarray:
         return d + 1e-3 * self.p["excess_mm"] * np.exp(-np.asarray(s) / (1e-3 * self.p["length_mm"]))

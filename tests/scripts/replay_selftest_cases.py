@@ -9,7 +9,8 @@ is written. Minutes per case (no engine confirmation, 40 resamples, one worker).
 
 Run: ``python tests/scripts/replay_selftest_cases.py [--show] CASE [CASE ...]``; exits 1 if any case
 differs. ``--show`` also prints, per case, each global effect the new run names, its parameters and
-what it alone changes ln k by (``ln_k_change``), beside the generator's size of the hidden effect
+what it alone changes ln k by (``ln_k_change``) and, where tested, its scope per cane, beside the
+generator's size of the hidden effect
 (the case row's ``size``: the median |change in ln k| it makes in the generator's own beam).
 """
 import json
@@ -17,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from canebench.discovery.checks_text import change_text
+from canebench.discovery.checks_text import change_text, scope_text
 from canebench.discovery.selftest import discover_case
 from compare_discoveries import json_diff, load_doc  # beside this script
 
@@ -42,8 +43,9 @@ def main(cases: list[str]) -> int:
         if show:
             print(f"    hidden: {stored['case']['effects']}; the generator's size (median |change in ln k|) {stored['row']['size']:.3f}")
             for n in new["named"]:
-                if n["scope"] == "global":
-                    print(f"    named: {n['effect']} {n['params']}; alone: {change_text(n) or 'ln k -'}")
+                if n["scope"] != "per_trial":
+                    print(f"    named: {n['effect']} {n['params']}; alone: {change_text(n) or 'ln k -'}"
+                          + (f"; {scope_text(n)}" if scope_text(n) else ""))
     return 1 if differs else 0
 
 

@@ -1,0 +1,333 @@
+"""Per-cane scope: does a named effect's parameter differ from cane to cane?
+
+Some effects are each cane's own: a root's stiffness is its plant's and its soil's, a collar
+its cane's. The selection fits every effect globally (one value for all canes, each cane's
+own level beside it as a random effect). Here each named effect whose class allows the
+``per_cane`` scope (:attr:`~canebench.model.effects.Effect.scopes`) is asked whether its
+parameter varies between canes beyond what the data's noise makes it seem to.
+
+Free values per cane would cost a parameter each (18 on 54 trials, three pushes a cane); the
+count is penalized instead by a hierarchical model with one extra parameter: the cane's value
+v_c = exp(mu + omega z_c), z_c ~ N(0, 1), integrated out of each cane's likelihood by
+Gauss-Hermite quadrature. On cane c (trials i):
+
+    ln k_field_i - P_i(v_c) ~ N(0, sigma^2 I + tau^2 11^T + G_c)
+
+P is the screen's prediction (:meth:`.screenset.Anchored.predict`) with the other named effects
+at their fitted values, tau^2 the cane's own level (its modulus), and G_c the covariance, over the
+cane's pushes, of the model's ln k when the cane's caliper line is off by its own error
+(:func:`.adequacy.geometry_draws`): a line whose slope is off moves a cane's low and high pushes
+apart, as a root or a collar of its own would, and that must not pass for one. For an effect on
+the diameter, the calipers' penalty (:meth:`.screenset.ScreenSet.caliper_nll`) of the cane's
+value is part of the cane's likelihood. P and that penalty are tabulated once over a grid of
+ln v and interpolated.
+
+omega = 0 (the global fit) is tested against omega > 0 by the likelihood ratio; omega = 0 lies
+on the boundary, so p = P(chi^2_1 > LR) / 2. The scope is ``per_cane`` when p < alpha (split over
+the effects tested) and the canes' own values move the model by at least ``min_change`` in mean
+|ln k| (the selection's materiality) from the population's median. Each cane's value is its
+posterior mean of ln v under the fitted hierarchy (shrunk toward the median where its pushes say
+little); a cane outside the data has only the median.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from scipy import stats
+from scipy.optimize import minimize
+from scipy.special import logsumexp
+
+from ..model.effects import EFFECTS, AppliedEffects, EffectSpec, Parameter
+from .adequacy import geometry_draws
+from .fit import SIGMA_FLOOR
+from .screenset import Anchored
+
+#: Gauss-Hermite nodes over each cane's value (the integrand is a Gaussian in ln k times a smooth
+#: prediction; 32 nodes integrate it to well under the optimizer's tolerance up to omega = 2)
+N_NODES = 32
+#: points of the ln v grid the predictions are tabulated on (linear interpolation between them)
+N_GRID = 321
+#: the grid spans the fitted value times exp(+-GRID_HALF_WIDTH): a spread of omega = 2 (a factor 7
+#: per sd) reaches 2.5 sd at the ends; nodes beyond it take the end's prediction
+GRID_HALF_WIDTH = 5.0
+#: draws of the caliper lines' error for G_c
+N_GEOMETRY_DRAWS = 400
+LOG_FLOOR = -30.0
+#: family-wise level of the per-cane tests (split over the effects tested). Stricter than a selection
+#: step's: a per-cane scope adds a value for every cane, and on data drawn from the hierarchy's own
+#: null (the bundled canes' screen, a global root, Gaussian noise and caliper-line errors) 5 of 60
+#: fell below 0.05 and none below 0.01, while a spread of 0.7 in ln k_root was found as often at
+#: 0.005 as at 0.05 (17 of 20): see tests/test_per_cane.py
+PER_CANE_ALPHA = 0.01
+
+
+@dataclass
+class PerCaneTest:
+    """The per-cane test of one named effect (:func:`per_cane_test`).
+
+    Attributes
+    ----------
+    effect, parameter, unit
+        The effect, the parameter that varies per cane, its unit.
+    global_value
+        The named (global) fit's value.
+    median
+        exp(mu): the population's median under the hierarchy.
+    ln_sd
+        omega: the sd of ln v between canes (0 when the fit puts it there).
+    lr, p, alpha
+        Likelihood ratio (omega > 0 against 0), its boundary p, and the level it was judged at.
+    spread
+        Mean over the trials of |ln k| moved by the canes' own values from the median's.
+    per_cane
+        Whether the scope is per cane (``p < alpha`` and ``spread >= min_change``).
+    values, ln_sd_each
+        Each cane's value (exp of its posterior mean of ln v) and the posterior sd of its ln v.
+    reason
+        Why it is (or is not) per cane, in words.
+    """
+
+    effect: str
+    parameter: str
+    unit: str
+    global_value: float
+    median: float
+    ln_sd: float
+    lr: float
+    p: float
+    alpha: float
+    spread: float
+    per_cane: bool
+    values: dict[str, float] = field(default_factory=dict)
+    ln_sd_each: dict[str, float] = field(default_factory=dict)
+    reason: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"parameter": self.parameter, "unit": self.unit, "per_cane": self.per_cane,
+                "median": self.median, "ln_sd_between_canes": self.ln_sd, "lr": self.lr, "p": self.p,
+                "alpha": self.alpha, "spread_mean_abs_ln_k": self.spread, "reason": self.reason,
+                "values": dict(self.values), "ln_sd_each": dict(self.ln_sd_each)}
+
+    def to_df(self) -> "Any":
+        import pandas as pd
+
+        return pd.DataFrame({"cane": list(self.values), "effect": self.effect, "parameter": self.parameter,
+                             "value": list(self.values.values()),
+                             "ln_sd": [self.ln_sd_each[c] for c in self.values]})
+
+    def spec(self, named: EffectSpec) -> EffectSpec:
+        """``named`` with the scope this test found: per cane, each cane's own value as ``local``
+        beside the global fit's value (which holds for a cane the data do not have: the engines and
+        the gap out of sample are that fit's); else ``named`` unchanged."""
+        if not self.per_cane:
+            return named
+        local = tuple(sorted((c, ((self.parameter, v),)) for c, v in self.values.items()))
+        return EffectSpec(named.name, named.params, local, "per_cane")
+
+
+def varying_parameter(name: str) -> str | None:
+    """The parameter of effect ``name`` that may vary per cane: its first one that switches the effect
+    off, where the effect allows the ``per_cane`` scope and is not the cane's level itself (a modulus
+    scale per cane is the random level every fit already has); None otherwise."""
+    cls = EFFECTS[name]
+    if "per_cane" not in cls.scopes or name == "modulus_scale":
+        return None
+    return next((p for p, par in cls.parameters.items() if par.switches_off), None)
+
+
+class _Hierarchy:
+    """The hierarchical likelihood of one effect's per-cane parameter (see the module docstring).
+
+    Parameters
+    ----------
+    grid : (g,) array
+        Uniform grid of ln v the tables are given on.
+    P : (g, n) array
+        Each trial's predicted ln k at each grid value.
+    pen : (g, canes) array
+        Each cane's calipers' penalty at each grid value (zeros for an effect off the diameter).
+    y : (n,) array
+        The field's ln k.
+    canes : (n,) array
+        Each trial's cane (``pen``'s columns follow their sorted unique values).
+    G : (n, n) array
+        The caliper lines' error covariance (only each cane's own block is used).
+    """
+
+    def __init__(self, grid: np.ndarray, P: np.ndarray, pen: np.ndarray, y: np.ndarray, canes: np.ndarray,
+                 G: np.ndarray):
+        self.grid, self.P, self.pen, self.y = np.asarray(grid, float), np.asarray(P, float), np.asarray(pen, float), y
+        self.step = float(self.grid[1] - self.grid[0])
+        self.uniq, inv = np.unique(canes, return_inverse=True)
+        # canes batched by their number of trials: one stacked Cholesky per size, not one per cane
+        self.batches = []
+        for size in np.unique(np.bincount(inv)):
+            ks = [k for k in range(len(self.uniq)) if np.sum(inv == k) == size]
+            rows = np.array([np.flatnonzero(inv == k) for k in ks])  # (m, size)
+            self.batches.append((np.array(ks), rows, G[rows[:, :, None], rows[:, None, :]]))
+        self.x, self.w = np.polynomial.hermite.hermgauss(N_NODES)
+        self.logw = np.log(self.w / math.sqrt(math.pi))
+
+    def interp(self, table: np.ndarray, lnv: np.ndarray) -> np.ndarray:
+        """Rows of ``table`` (over the grid) at each ``lnv`` (linear; the ends beyond the grid)."""
+        u = np.clip((np.asarray(lnv, float) - self.grid[0]) / self.step, 0.0, len(self.grid) - 1.000001)
+        j = np.floor(u).astype(int)
+        f = (u - j)[:, None]
+        return table[j] * (1.0 - f) + table[j + 1] * f
+
+    def cane_logdens(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(nodes, canes) log density of each cane's data at each node's value, and the nodes' ln v."""
+        mu, log_omega, log_s2, log_t2 = theta
+        omega = math.exp(log_omega) if log_omega > LOG_FLOOR else 0.0
+        s2 = max(math.exp(log_s2), SIGMA_FLOOR**2)
+        t2 = math.exp(log_t2) if log_t2 > LOG_FLOOR else 0.0
+        lnv = mu + math.sqrt(2.0) * omega * self.x
+        R = self.y[None, :] - self.interp(self.P, lnv)  # (nodes, trials)
+        out = -self.interp(self.pen, lnv)  # (nodes, canes)
+        for ks, rows, G in self.batches:
+            n = rows.shape[1]
+            S = s2 * np.eye(n) + t2 + G  # (m, n, n)
+            try:
+                L = np.linalg.cholesky(S)
+            except np.linalg.LinAlgError:
+                return np.full_like(out, -np.inf), lnv
+            z = np.linalg.solve(L, np.transpose(R[:, rows], (1, 2, 0)))  # (m, n, nodes)
+            logdet = 2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2)), axis=1)  # (m,)
+            out[:, ks] -= 0.5 * (np.sum(z**2, axis=1) + (logdet + n * math.log(2 * math.pi))[:, None]).T
+        return out, lnv
+
+    def nll(self, theta: np.ndarray) -> float:
+        ld, _ = self.cane_logdens(theta)
+        v = -float(np.sum(logsumexp(self.logw[:, None] + ld, axis=0)))
+        return v if math.isfinite(v) else 1e12
+
+    def posterior(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each cane's posterior mean and sd of ln v."""
+        ld, lnv = self.cane_logdens(theta)
+        a = self.logw[:, None] + ld
+        wts = np.exp(a - logsumexp(a, axis=0))
+        m = wts.T @ lnv
+        sd = np.sqrt(np.maximum(wts.T @ lnv**2 - m**2, 0.0))
+        return m, sd
+
+
+def _tables(at: Anchored, others: tuple[EffectSpec, ...], spec: EffectSpec,
+            parameter: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ln v grid about ``spec``'s value, each trial's prediction and each cane's calipers'
+    penalty on it, with ``others`` in place."""
+    par: Parameter = EFFECTS[spec.name].parameters[parameter]
+    params = dict(spec.params)
+    v0 = params[parameter]
+    lo, hi = math.log(v0) - GRID_HALF_WIDTH, math.log(v0) + GRID_HALF_WIDTH
+    if not par.log:  # a linear parameter (a flare's excess) stays within a few times its search range
+        hi = min(hi, math.log(3.0 * par.high))
+    grid = np.linspace(lo, hi, N_GRID)
+    ss = at.screen
+    uniq, inv = np.unique(ss.canes, return_inverse=True)
+    preds, pens = [], []
+    for g in grid:
+        specs = others + (replace(spec, params=tuple(sorted({**params, parameter: math.exp(g)}.items()))),)
+        preds.append(at.predict(specs))
+        fx = AppliedEffects([s.instance() for s in specs])
+        if fx.changes_diameter and len(ss.cal_s):
+            # each cane's calipers once (every trial carries them, weighted 1 / the cane's trial count)
+            terms = 0.5 * ss.cal_w * (ss.caliper_change(fx) / ss.cal_sigma) ** 2
+            pens.append(np.bincount(inv[ss.cal_idx], terms, minlength=len(uniq)))
+        else:
+            pens.append(np.zeros(len(uniq)))
+    return grid, np.asarray(preds), np.asarray(pens)
+
+
+def _fit(h: _Hierarchy, starts: list[np.ndarray], free_omega: bool) -> tuple[np.ndarray, float]:
+    """Nelder-Mead from each start; omega held at 0 unless ``free_omega``."""
+    best = None
+    for s in starts:
+        if free_omega:
+            res = minimize(h.nll, s, method="Nelder-Mead",
+                           options={"xatol": 1e-4, "fatol": 1e-6, "maxiter": 4000, "maxfev": 4000})
+            x = res.x
+        else:
+            def obj(t: np.ndarray) -> float:
+                return h.nll(np.array([t[0], -np.inf, t[1], t[2]]))
+
+            res = minimize(obj, s[[0, 2, 3]], method="Nelder-Mead",
+                           options={"xatol": 1e-4, "fatol": 1e-6, "maxiter": 3000, "maxfev": 3000})
+            x = np.array([res.x[0], -np.inf, res.x[1], res.x[2]])
+        if best is None or res.fun < best[1]:
+            best = (x, float(res.fun))
+    return best
+
+
+def per_cane_test(at: Anchored, log_k_field: np.ndarray, specs: tuple[EffectSpec, ...], name: str,
+                  alpha: float, min_change: float, diameter_factor: float = 1.0, s2: float = 0.01,
+                  t2: float = 0.02, seed: int = 0) -> PerCaneTest | None:
+    """Whether effect ``name`` (one of the fitted ``specs``) varies per cane; None when its class does
+    not allow it (:func:`varying_parameter`).
+
+    Parameters
+    ----------
+    at, log_k_field
+        The screen the fit predicts from and the field's ln k, in the same trial order.
+    specs
+        The fitted global model; the others stay at their values.
+    alpha, min_change
+        The test's level and the materiality of the canes' spread (mean |change in ln k|).
+    diameter_factor
+        The model's diameter factor (the caliper line's error scales with it).
+    s2, t2
+        The global fit's within- and between-cane variances (starting values).
+    """
+    parameter = varying_parameter(name)
+    if parameter is None:
+        return None
+    spec = next(s for s in specs if s.name == name)
+    others = tuple(s for s in specs if s.name != name)
+    unit = EFFECTS[name].parameters[parameter].unit
+    v0 = dict(spec.params)[parameter]
+    if not (math.isfinite(v0) and v0 > 0):
+        return None
+    gd = geometry_draws(at, specs, factor=diameter_factor, n_draws=N_GEOMETRY_DRAWS, seed=seed)
+    ok = np.all(np.isfinite(gd), axis=0)
+    G = np.cov(np.where(ok[None, :], gd, 0.0), rowvar=False)
+    grid, P, pen = _tables(at, others, spec, parameter)
+    # a trial the screen cannot predict somewhere on the grid (an engine that failed at the anchor)
+    # is left out of the test; a cane left with no trial gets no value of its own
+    keep = np.all(np.isfinite(P), axis=0) & np.isfinite(log_k_field)
+    canes = at.screen.canes[keep]
+    if len(np.unique(canes)) < 3:
+        return None
+    kept_canes = np.isin(np.unique(at.screen.canes), np.unique(canes))
+    h = _Hierarchy(grid, P[:, keep], pen[:, kept_canes], log_k_field[keep], canes, G[np.ix_(keep, keep)])
+    base = np.array([math.log(v0), -np.inf, math.log(max(s2, SIGMA_FLOOR**2)), math.log(max(t2, 1e-6))])
+    x0, f0 = _fit(h, [base, base + np.array([0.0, 0.0, -1.0, 0.0])], free_omega=False)
+    starts = [np.array([x0[0], math.log(om), x0[2], x0[3]]) for om in (0.15, 0.5, 1.2)]
+    x1, f1 = _fit(h, starts, free_omega=True)
+    if f1 > f0:  # nested: the alternative can do no worse than omega = 0
+        x1, f1 = x0, f0
+    lr = max(0.0, 2.0 * (f0 - f1))
+    p = 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
+    omega = math.exp(x1[1]) if x1[1] > LOG_FLOOR else 0.0
+    m, sd = h.posterior(x1)
+    # how far the canes' own values move the model from the median's
+    cane_of_trial = np.unique(canes, return_inverse=True)[1]
+    own = np.array([h.interp(h.P[:, [i]], np.array([m[k]]))[0, 0] for i, k in enumerate(cane_of_trial)])
+    mid = h.interp(h.P, np.array([x1[0]]))[0]
+    moved = np.abs(own - mid)
+    spread = float(np.mean(moved[np.isfinite(moved)])) if np.any(np.isfinite(moved)) else 0.0
+    per = bool(p < alpha and spread >= min_change)
+    if per:
+        reason = (f"{parameter} varies between canes (ln sd {omega:.2f}; LR {lr:.1f}, p = {p:.2g} < {alpha:.3g}) and "
+                  f"the canes' own values move the model by {spread:.3f} in mean |ln k|")
+    elif p >= alpha:
+        reason = (f"no evidence that {parameter} varies between canes beyond the noise and the caliper lines' "
+                  f"error (LR {lr:.2f}, p = {p:.2g}, against {alpha:.3g})")
+    else:
+        reason = (f"{parameter} varies between canes (p = {p:.2g}) but the canes' own values move the model by "
+                  f"{spread:.3f} in mean |ln k|, under {min_change:.3g}: kept global")
+    return PerCaneTest(name, parameter, unit, v0, math.exp(x1[0]), omega, lr, p, alpha, spread, per,
+                       {str(c): float(math.exp(v)) for c, v in zip(h.uniq, m)},
+                       {str(c): float(s) for c, s in zip(h.uniq, sd)}, reason)
