@@ -14,7 +14,7 @@ code's effect classes:
 
 * ``modulus_scale``: every cane's true modulus times ``scale``;
 * ``root_compliance``: the rod's base is a rotational spring ``k_root`` (with ``ln_sd``,
-  each cane's is ``k_root`` exp(``ln_sd`` z), z standard normal: a root per plant);
+  each cane's is ``k_root`` exp(``ln_sd`` z), z standard normal: each cane its own root);
 * ``rig_compliance``: the rig records its own travel, cane deflection plus F / k_rig;
 * ``base_flare``: a root collar, d(s) (1 + a (1 - s / l)^2) for s < l (a
   polynomial collar, not the library's exponential);
@@ -175,7 +175,7 @@ def generate_hidden(out: Path, seed: int, effects: dict[str, dict] | None = None
                 E *= effects["modulus_scale"]["scale"]
             c_root = 1.0 / effects["root_compliance"]["k_root"] if "root_compliance" in effects else 0.0
             if c_root and effects["root_compliance"].get("ln_sd"):
-                # each plant's root its own: k_root times exp(ln_sd z), z from a stream of the cane's
+                # each cane's root its own: k_root times exp(ln_sd z), z from a stream of the cane's
                 # own, so the dataset's other draws are those of the same seed without the spread
                 z = np.random.default_rng([seed, bush, cane]).normal()
                 c_root /= float(np.exp(effects["root_compliance"]["ln_sd"] * z))

@@ -200,8 +200,9 @@ def run_case(case: dict[str, Any], root: str) -> dict[str, Any]:
     lv = (sh.get("level") or {}).get("mean")
     row["shape_level"] = lv if lv is not None else math.nan
     row["false_names"] = "+".join(sorted(set(named) - hidden)) or ""
-    # named with a value per cane (:mod:`.per_cane`): the suite hides every effect with one value for
-    # all canes (a flare's collar is a share of each cane's diameter, so in mm it differs per cane)
+    # named with a value per cane (:mod:`.per_cane`): the suite hides a root, a rig, a scale and a pitch
+    # with one value for all canes, so such a scope is wrong there; a flare's collar is a share of each
+    # cane's diameter, so in mm (the library's excess) it does differ per cane, and one is not
     row["per_cane"] = "+".join(e for e, n in named.items() if n["scope"] == "per_cane")
     # names won by less than CLOSE_BIC, with the rival beside each ("effect>rival; ...", a rival
     # can be a pair "a+b")
@@ -336,8 +337,11 @@ def summarize(df: pd.DataFrame) -> dict[str, Any]:
         "unexplained_on_correctly_named": int(df[df.kind.isin(["single", "pair"]) & df.correct].unexplained.sum()),
         "n_correctly_named": int((df.kind.isin(["single", "pair"]) & df.correct).sum()),
         "out_of_library_misnamed": int((df[df.kind == "out_of_library"].named != "none").sum()),
-        # named effects given a value per cane, where every hidden effect has one for all canes
+        # named effects given a value per cane; the suite hides none but a flare's with one (its collar
+        # is a share of each cane's diameter): any other counted here is a wrong scope
         "per_cane_scopes": int(sum(len(v.split("+")) for v in _col(df, "per_cane", "") if v)),
+        "per_cane_scopes_not_flare": int(sum(e != "base_flare" for v in _col(df, "per_cane", "") if v
+                                             for e in v.split("+"))),
         # the withholding's cost: a hidden library effect fitted, then reported as partial only
         "names_withheld_where_hidden": int((df.kind.isin(["single", "pair"]) & (_col(df, "partial", "") != "")).sum()),
         # and a hidden library effect that passed the selection but not its interval

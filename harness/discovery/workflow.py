@@ -154,6 +154,15 @@ class DiscoveryResult:
     unsupported: list[dict[str, Any]] = field(default_factory=list)
     #: the single effect too small to name whose better fit stopped the search (:attr:`.selection.Selection.too_small`)
     too_small_to_name: dict[str, Any] | None = None
+    #: the named effects found to differ per cane, by name (:mod:`.per_cane`)
+    per_cane: dict[str, PerCaneTest] = field(default_factory=dict)
+
+    def model_file_config(self) -> ModelConfig:
+        """The fitted model as ``model.yaml`` holds it: :attr:`config` (what the engines confirmed,
+        the out-of-sample gap's) with each per-cane effect's canes' values (``local``) and the
+        population's median for a cane not in the data."""
+        return self.config.replace(effects=tuple(self.per_cane[s.name].spec(s) if s.name in self.per_cane else s
+                                                 for s in self.config.effects))
 
     def to_df(self) -> pd.DataFrame:
         return self.trials
@@ -436,10 +445,6 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         partial_config = cfg0.replace(effects=fitted + obstruction)
         fitted = ()
     model = cfg0.replace(effects=fitted + obstruction)
-    # the model file carries each cane's own value where the scope is per cane; the engines confirm
-    # the global fit, the one the gap out of sample is of (a held-out cane has no value of its own)
-    model_file = cfg0.replace(effects=tuple(per_cane[s.name].spec(s) if s.name in per_cane else s
-                                            for s in fitted) + obstruction)
 
     # -- confirm on the engines
     engines = pd.DataFrame()
@@ -460,10 +465,9 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     timing["total_s"] = time.perf_counter() - t_start
     # the best account of what the residual leans toward was too small to name: it stays unexplained
     result = DiscoveryResult(baseline, named, verdict.unexplained or sel.too_small is not None, gap, feats,
-                             pd.DataFrame(steps), verdict.structure_before, verdict.structure_after, model_file,
-                             engines,
+                             pd.DataFrame(steps), verdict.structure_before, verdict.structure_after, model, engines,
                              stop, notes, timing, anchors, adequacy, partial, partial_config,
-                             pitch_table, unsupported, sel.too_small)
+                             pitch_table, unsupported, sel.too_small, per_cane)
     result.notes.append(f"baseline: {base_text}")
     if any(t.cane.provenance.get("assumptions") for t in trials):
         for a in dict.fromkeys(a for t in trials for a in t.cane.provenance.get("assumptions", [])):
@@ -580,8 +584,9 @@ def per_cane_note(per_cane: Mapping[str, PerCaneTest]) -> str:
     """The note on the effects whose value differs between canes."""
     return "; ".join(
         f"{t.effect}: {t.reason}; each cane's {t.parameter} ({min(t.values.values()):.4g} to "
-        f"{max(t.values.values()):.4g} {t.unit}) is in model.yaml (local), the global value for a cane not in "
-        f"the data; the engines and the gap out of sample are the global fit's" for t in per_cane.values())
+        f"{max(t.values.values()):.4g} {t.unit}) is in model.yaml (local), with their median ({t.median:.4g}) "
+        f"for a cane not in the data; the engines, the interval and the gap out of sample are the global "
+        f"fit's" for t in per_cane.values())
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:
@@ -697,7 +702,7 @@ def write_outputs(res: DiscoveryResult, out: Path, preset: str, ci: dict) -> Non
             ci95[n["effect"]] = n["ci95"]
     made = {"produced_by": "canebench discover", "baseline": res.baseline,
             **{k: doc["provenance"][k] for k in ("canebench", "git_commit", "created", "engines")}}
-    write_model_file(out / "model.yaml", res.config, preset, ci95, made)
+    write_model_file(out / "model.yaml", res.model_file_config(), preset, ci95, made)
     if res.partial_config is not None:
         write_model_file(out / "model_partial.yaml", res.partial_config, preset,
                          {n["effect"]: n["ci95"] for n in res.partial if n["ci95"]},

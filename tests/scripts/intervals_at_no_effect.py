@@ -18,7 +18,7 @@ for root in sys.argv[1:]:
         doc = json.loads(f.read_text())
         n_files += 1
         for n in doc["named"]:
-            if n["scope"] != "global":
+            if n["scope"] == "per_trial":
                 continue
             n_named += 1
             spec = EffectSpec(n["effect"], tuple(n["params"].items()))

@@ -74,7 +74,7 @@ def _one(spec: str, out: str) -> dict:
         wf.bootstrap_ci = real
     doc = res.to_json()
     truth = json.loads(truth_file.read_text())["effects"]
-    named = [n for n in doc["named"] if n["scope"] == "global"]
+    named = [n for n in doc["named"] if n["scope"] != "per_trial"]
     row = {"case": name, "hidden": "+".join(truth) or "none", "named": "+".join(n["effect"] for n in doc["named"]),
            "n_boot": n_boot, "seed": seed, "why_not": ""}
     if not calls or len(named) != 1 or len(named) != len(doc["named"]):

@@ -1,6 +1,6 @@
-"""The per-cane test on the generator's exact rod: a root per plant, and one root for every cane.
+"""The per-cane test on the generator's exact rod: a root per cane, and one root for every cane.
 
-Writes (or reuses) ``OUT/per_plant`` (k_root about ``K`` N m/rad, scattered by ``LN_SD`` in ln
+Writes (or reuses) ``OUT/per_cane`` (k_root about ``K`` N m/rad, scattered by ``LN_SD`` in ln
 between canes) and ``OUT/one`` (``K`` for every cane), both from ``SEED``, discovers each as the
 self-test does (:func:`canebench.discovery.selftest.discover_case`) and prints the root's scope and
 test and, where per cane, how closely each cane's value follows the generator's (r and rms of the logs).
@@ -20,7 +20,7 @@ from canebench.discovery.selftest import discover_case
 
 
 def main(out: Path, seed: int, k: float, ln_sd: float) -> None:
-    for tag, eff in (("per_plant", {"k_root": k, "ln_sd": ln_sd}), ("one", {"k_root": k})):
+    for tag, eff in (("per_cane", {"k_root": k, "ln_sd": ln_sd}), ("one", {"k_root": k})):
         d = out / tag
         if not (d / "truth" / "truth.json").exists():
             generate_hidden(d, seed, {"root_compliance": eff})
@@ -44,6 +44,10 @@ def main(out: Path, seed: int, k: float, ln_sd: float) -> None:
                 b = np.log([kt[x] for x in c])
                 print(f"  each cane's k_root against the generator's: r {np.corrcoef(a, b)[0, 1]:.2f}, rms "
                       f"{np.sqrt(np.mean((a - b) ** 2)):.2f} in ln")
+        tr = res.trials
+        left = tr[tr.not_scored != ""]
+        print(f"  scored: {int((tr.not_scored == '').sum())} trials on {tr[tr.not_scored == ''].cane.nunique()} canes"
+              + "".join(f"; {t} not scored: {why}" for t, why in zip(left.trial, left.not_scored)))
         print(f"  unexplained {res.unexplained}; median |ln| {res.gap['before']['median_abs_log_ratio']:.3f} -> "
               f"{res.gap['after_cv']['median_abs_log_ratio']:.3f} out of sample")
 

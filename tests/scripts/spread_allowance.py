@@ -44,7 +44,7 @@ def load(roots: list[str]) -> list[dict]:
             folder = os.path.dirname(f)
             row_f = os.path.join(folder, "selftest_row.json")
             st = json.load(open(row_f))["row"] if os.path.exists(row_f) else None
-            named = [n["effect"] for n in d.get("named", []) if n.get("scope") == "global"]
+            named = [n["effect"] for n in d.get("named", []) if n.get("scope") != "per_trial"]
             sets.append({"set": os.path.relpath(folder, os.path.dirname(os.path.abspath(root).rstrip("/"))),
                          "sd": float(wd.get("sd", float("nan"))),
                          "geometry_sd": float(wd.get("geometry_sd", float("nan"))),

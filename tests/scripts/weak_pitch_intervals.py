@@ -28,6 +28,6 @@ for i, angle in enumerate(ANGLES):
     res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=100,
                    out=out / f"pitch{angle:+.0f}" / "out")
     print(f"hidden {angle:+.0f} deg (median |d ln k| {_effect_size(d):.3f}): "
-          f"named {[(n['effect'], n['params'], n.get('ci95')) for n in res.named if n['scope'] == 'global']}; "
+          f"named {[(n['effect'], n['params'], n.get('ci95')) for n in res.named if n['scope'] != 'per_trial']}; "
           f"refused {[(u['effect'], u['params'], u['ci95']) for u in res.unsupported]}; "
           f"unexplained {res.unexplained}", flush=True)
