@@ -79,6 +79,61 @@ def test_the_hierarchy_integrates_each_canes_value_exactly_where_the_prediction_
     assert h0.nll(theta0) == pytest.approx(float(np.sum(group_nll(r, canes, s2, t2))), rel=1e-12)
 
 
+def test_the_quadrature_holds_with_a_calipers_penalty_and_past_the_grids_ends():
+    """Two cases the linear closed form above leaves out. (1) A calipers' penalty q_c (u - u0_c)^2 on
+    each cane (a quadratic: its spline is exact), checked against a trapezoid integral of prior x
+    likelihood x exp(-penalty) written here from the formulas (2e5 points over +-12 sd), to 1e-9.
+    (2) Canes whose values lie far past the grid's ends (grid +-0.5 about mu, values 2-4 sd out):
+    the tables go on straight beyond them, exact for a linear prediction, so the closed form must
+    hold there too, to 1e-9 (held flat past the ends, as in 685ac7e, this case was 263 nats off)."""
+    from scipy.integrate import trapezoid
+    from scipy.stats import multivariate_normal
+
+    from canebench.discovery import per_cane as pc
+
+    rng = np.random.default_rng(8)
+    canes = np.repeat([f"c{i}" for i in range(5)], [3, 3, 2, 1, 3])
+    n, C = len(canes), 5
+    uniq, inv = np.unique(canes, return_inverse=True)
+    a, b = rng.normal(0.0, 0.3, n), -rng.uniform(0.3, 0.9, n)
+    mu, omega, s2, t2 = 0.2, 0.7, 0.004, 0.01
+    theta = np.array([mu, math.log(omega), math.log(s2), math.log(t2)])
+    G = np.zeros((n, n))
+    # (1) a penalty, the grid wide
+    q, u0 = rng.uniform(0.5, 20.0, C), rng.normal(mu, 0.5, C)
+    grid = np.linspace(-6.0, 6.0, pc.N_GRID)
+    y = a + b * (mu + omega * rng.normal(size=C))[inv] + rng.normal(0.0, 0.06, n)
+    pen = q[None, :] * (grid[:, None] - u0[None, :]) ** 2
+    h = pc._Hierarchy(grid, a[None, :] + b[None, :] * grid[:, None], pen, y, canes, G)
+    want = 0.0
+    for k in range(C):
+        m = inv == k
+        u = mu + omega * np.linspace(-12.0, 12.0, 200001)
+        S = s2 * np.eye(m.sum()) + t2
+        r = y[m][None, :] - (a[m][None, :] + b[m][None, :] * u[:, None])
+        ll = multivariate_normal(np.zeros(m.sum()), S).logpdf(r) - q[k] * (u - u0[k]) ** 2
+        lp = -0.5 * ((u - mu) / omega) ** 2 - math.log(omega * math.sqrt(2 * math.pi))
+        top = np.max(ll + lp)
+        want -= top + math.log(trapezoid(np.exp(ll + lp - top), u))
+    assert h.nll(theta) == pytest.approx(want, rel=1e-9, abs=1e-9)
+    # (2) values far past the ends of a narrow grid, no penalty: the closed form
+    grid = np.linspace(mu - 0.5, mu + 0.5, 41)
+    z = np.array([-4.0, -2.5, 2.0, 3.0, 4.0])
+    y = a + b * (mu + omega * z)[inv] + rng.normal(0.0, 0.03, n)
+    h = pc._Hierarchy(grid, a[None, :] + b[None, :] * grid[:, None], np.zeros((41, C)), y, canes, G)
+    want, post = 0.0, []
+    for k in range(C):
+        m = inv == k
+        V = s2 * np.eye(m.sum()) + t2 + omega**2 * np.outer(b[m], b[m])
+        want -= multivariate_normal(a[m] + b[m] * mu, V).logpdf(y[m])
+        post.append(mu + omega**2 * b[m] @ np.linalg.solve(V, y[m] - a[m] - b[m] * mu))
+    assert h.nll(theta) == pytest.approx(want, rel=1e-9, abs=1e-9)
+    assert h.posterior(theta)[0] == pytest.approx(np.array(post), abs=1e-9)
+    # evaluated again after other parameters (the modes start from the last ones), the same answer
+    h.nll(theta + np.array([1.0, 0.5, 0.0, 0.0]))
+    assert h.nll(theta) == pytest.approx(want, rel=1e-9, abs=1e-9)
+
+
 def _simulate(at, rng, k_med, ln_sd):
     """ln k_field on the bundled canes' screen: a root per cane (ln-normal about ``k_med``), each
     cane's own level (modulus, sd 0.15 in ln), trial noise 0.05 and one draw of the caliper lines'
@@ -129,9 +184,9 @@ def test_a_global_root_stays_global_and_a_root_per_cane_is_found_with_each_canes
 
 
 def test_a_per_cane_value_reaches_each_canes_trials_through_the_model_file(tmp_path):
-    """A per-cane effect's spec gives each cane its own value and a cane not in the data the
-    population's median; the model file carries both, and each trial's configuration (what every
-    backend compiles) holds its cane's value."""
+    """A per-cane effect's spec gives each cane its own value and keeps the global fit's for a cane
+    not in the data (the value the engines confirm, with its interval); the model file carries both,
+    and each trial's configuration (what every backend compiles) holds its cane's value."""
     from canebench.discovery.per_cane import PerCaneTest
     from canebench.model.modelfile import load_model_file, write_model_file
     from canebench.model.presets import PRESETS
@@ -139,12 +194,12 @@ def test_a_per_cane_value_reaches_each_canes_trials_through_the_model_file(tmp_p
     t = PerCaneTest("root_compliance", "k_root", "N m/rad", 20.0, 21.0, 0.6, 12.0, 1e-4, 0.01, 0.2, True,
                     {"b1c1": 8.0, "b1c2": 55.0}, {"b1c1": 0.3, "b1c2": 0.4})
     spec = t.spec(EffectSpec.parse("root_compliance(k_root=20)"))
-    assert spec.scope == "per_cane" and dict(spec.params) == {"k_root": 21.0}
+    assert spec.scope == "per_cane" and dict(spec.params) == {"k_root": 20.0}
     cfg = PRESETS["beam-consistent"].replace(effects=(spec,))
     f = write_model_file(tmp_path / "model.yaml", cfg, "beam-consistent")
     back = load_model_file(f)
     assert back.effects[0].scope == "per_cane"
-    for cane, k in (("b1c1", 8.0), ("b1c2", 55.0), ("b9c9", 21.0)):
+    for cane, k in (("b1c1", 8.0), ("b1c2", 55.0), ("b9c9", 20.0)):
         (e,) = back.localized(cane, f"{cane}t1").effects
         assert e.instance().root_compliance() == pytest.approx(1.0 / k)
     # not per cane: the spec is the global one, unchanged
@@ -153,9 +208,9 @@ def test_a_per_cane_value_reaches_each_canes_trials_through_the_model_file(tmp_p
 
 
 def test_a_collar_per_cane_is_scored_against_each_canes_calipers(bundled_screen):
-    """A flare's per-cane test carries each cane's calipers: the penalty tabulated per cane sums to
-    the screen's own caliper penalty (:meth:`ScreenSet.caliper_nll`, written separately) at every
-    value; one flare of 6 mm over 200 mm for all canes stays global, and a collar scattered by 0.7
+    """A flare's per-cane test carries each cane's calipers: each cane's tabulated penalty is the
+    screen's own caliper penalty (:meth:`ScreenSet.caliper_nll`, written separately) of that cane's
+    trials, at every value; one flare of 6 mm over 200 mm for all canes stays global, and a collar scattered by 0.7
     in ln between canes is found, its canes' values following the truth."""
     from canebench.discovery.adequacy import geometry_draws
     from canebench.discovery.fit import Candidate, fit_candidate
@@ -165,10 +220,11 @@ def test_a_collar_per_cane_is_scored_against_each_canes_calipers(bundled_screen)
     at = bundled_screen
     spec = EffectSpec.parse("base_flare(excess_mm=6, length_mm=200)")
     grid, _, pen = _tables(at, (), spec, "excess_mm")
+    uniq, inv = np.unique(at.screen.canes, return_inverse=True)
     for j in (0, 160, 300):
         fx = AppliedEffects([EffectSpec.parse(f"base_flare(excess_mm={np.exp(grid[j])}, length_mm=200)").instance()])
-        assert pen[j].sum() == pytest.approx(at.screen.caliper_nll(fx), rel=1e-12)
-    uniq, inv = np.unique(at.screen.canes, return_inverse=True)
+        for k, c in enumerate(uniq):  # each cane's column: its own calipers, counted once
+            assert pen[j, k] == pytest.approx(at.screen.subset(at.screen.canes == c).caliper_nll(fx), rel=1e-12)
     rng = np.random.default_rng(11)
     found = {}
     for ln_sd in (0.0, 0.7):
@@ -216,7 +272,8 @@ def test_discover_gives_each_cane_its_own_root_where_the_generator_hides_one_per
     """The generator's exact rod with each cane's root drawn about 20 N m/rad (ln sd 0.7): the
     root is named, per cane, with each cane's value following the truth (r >= 0.6 in ln; 0.79 in
     development), the model file carrying them; the same dataset with one root for all canes keeps
-    it global. The scope changes no name, interval or gap (the global fit's)."""
+    it global. The scope changes no name, interval or gap (the global fit's), and the engines and the
+    provenance hold the global model."""
     from canebench.canes.generate_hidden import generate_hidden
     from canebench.data.dataset import load_dataset
     from canebench.discovery.workflow import discover
@@ -239,6 +296,14 @@ def test_discover_gives_each_cane_its_own_root_where_the_generator_hides_one_per
     cfg = load_model_file(tmp_path / "out_per_cane" / "model.yaml")
     (e,) = [s for s in cfg.effects if s.name == "root_compliance"]
     assert e.scope == "per_cane" and set(dict(e.local)) == set(c)
+    # beside them the global fit's value, which a cane not in the data takes; the engines ran that
+    # global model, and the provenance records it (no canes' values)
+    assert dict(e.params)["k_root"] == pytest.approx(root["params"]["k_root"])
+    assert cfg.localized("b9c9", "b9c9t1").effects[0].instance().root_compliance() == pytest.approx(
+        1.0 / root["params"]["k_root"])
+    doc = json.loads((tmp_path / "out_per_cane" / "discovery.json").read_text())
+    prov = [x for x in doc["provenance"]["model_config"]["effects"] if x["effect"] == "root_compliance"]
+    assert prov and "local" not in prov[0] and prov[0]["scope"] == "global"
     res1, _ = out["one"]
     (root1,) = [n for n in res1.named if n["effect"] == "root_compliance"]
     assert root1["scope"] == "global" and not root1["per_cane_test"]["per_cane"]

@@ -238,7 +238,7 @@ def test_discover_withholds_a_pitch_the_traces_do_not_show(tmp_path, monkeypatch
                       candidates=("probe_misalignment",))
     sh = res.adequacy["shape"]
     assert [n["effect"] for n in res.partial] == ["probe_misalignment"], (res.partial, res.named)
-    assert not [n for n in res.named if n["scope"] == "global"]
+    assert not [n for n in res.named if n["scope"] != "per_trial"]
     assert sh["p"] < 0.002 and sh["beta"] < 0.3 and abs(sh["predicted_mean"]) > 0.1, sh
     assert res.adequacy["after_cv"]["p"] >= 0.002  # not the level trend
     assert res.unexplained and res.adequacy["inadequate"]

@@ -159,8 +159,8 @@ class DiscoveryResult:
 
     def model_file_config(self) -> ModelConfig:
         """The fitted model as ``model.yaml`` holds it: :attr:`config` (what the engines confirmed,
-        the out-of-sample gap's) with each per-cane effect's canes' values (``local``) and the
-        population's median for a cane not in the data."""
+        the out-of-sample gap's) with each per-cane effect's canes' values (``local``) beside its
+        global value, which a cane not in the data takes."""
         return self.config.replace(effects=tuple(self.per_cane[s.name].spec(s) if s.name in self.per_cane else s
                                                  for s in self.config.effects))
 
@@ -584,9 +584,9 @@ def per_cane_note(per_cane: Mapping[str, PerCaneTest]) -> str:
     """The note on the effects whose value differs between canes."""
     return "; ".join(
         f"{t.effect}: {t.reason}; each cane's {t.parameter} ({min(t.values.values()):.4g} to "
-        f"{max(t.values.values()):.4g} {t.unit}) is in model.yaml (local), with their median ({t.median:.4g}) "
-        f"for a cane not in the data; the engines, the interval and the gap out of sample are the global "
-        f"fit's" for t in per_cane.values())
+        f"{max(t.values.values()):.4g} {t.unit}; their median {t.median:.4g}) is in model.yaml (local); a cane "
+        f"not in the data takes the global fit's value, the one the engines confirm and the interval and the "
+        f"gap out of sample are of" for t in per_cane.values())
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:
