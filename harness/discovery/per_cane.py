@@ -20,7 +20,7 @@ cane's pushes, of the model's ln k when the cane's caliper line is off by its ow
 apart, as a root or a collar of its own would, and that must not pass for one. For an effect on
 the diameter, the calipers' penalty (:meth:`.screenset.ScreenSet.caliper_nll`) of the cane's
 value is part of the cane's likelihood. P and that penalty are tabulated once over a grid of
-ln v and interpolated.
+ln v, with cubic splines between its points and straight lines beyond its ends.
 
 omega = 0 (the global fit) is tested against omega > 0 by the likelihood ratio; omega = 0 lies
 on the boundary, so p = P(chi^2_1 > LR) / 2. The scope is ``per_cane`` when p < alpha (split over
@@ -54,7 +54,7 @@ N_NODES = 16
 #: points of the ln v grid the predictions are tabulated on (cubic splines between them)
 N_GRID = 321
 #: the grid spans the fitted value times exp(+-GRID_HALF_WIDTH): a spread of omega = 2 (a factor 7
-#: per sd) reaches 2.5 sd at the ends; nodes beyond it take the end's prediction
+#: per sd) reaches 2.5 sd at the ends; beyond them the tables go on straight at the ends' slopes
 GRID_HALF_WIDTH = 5.0
 #: draws of the caliper lines' error for G_c
 N_GEOMETRY_DRAWS = 400
