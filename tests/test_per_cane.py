@@ -191,7 +191,7 @@ def test_a_per_cane_value_reaches_each_canes_trials_through_the_model_file(tmp_p
     from canebench.model.modelfile import load_model_file, write_model_file
     from canebench.model.presets import PRESETS
 
-    t = PerCaneTest("root_compliance", "k_root", "N m/rad", 20.0, 21.0, 0.6, 12.0, 1e-4, 0.01, 0.2, True,
+    t = PerCaneTest("root_compliance", "k_root", "N m/rad", 21.0, 0.6, 12.0, 1e-4, 0.01, 0.2, True,
                     {"b1c1": 8.0, "b1c2": 55.0}, {"b1c1": 0.3, "b1c2": 0.4})
     spec = t.spec(EffectSpec.parse("root_compliance(k_root=20)"))
     assert spec.scope == "per_cane" and dict(spec.params) == {"k_root": 20.0}

@@ -67,7 +67,7 @@ def main(a: argparse.Namespace) -> int:
         stem = "selftest_subset" if a.selftest_cases else "selftest"
         print(f"written: {out / (stem + '.csv')}, {out / (stem + '.json')}")
         return 0
-    from ..discovery.checks_text import adequacy_lines
+    from ..discovery.checks_text import adequacy_lines, fitted_entry
     from ..discovery.verdict import INADEQUATE, UNEXPLAINED_WHY
     from ..discovery.workflow import discover
     from ..execute.progress import Progress
@@ -98,11 +98,11 @@ def main(a: argparse.Namespace) -> int:
         print(f"  not named: {u['effect']} {_params_text(u)}"
               + (f" (its interval reaches no effect: {', '.join(u['covers_null'])})" if u["covers_null"] else "")
               + (f" (entered beside {u['dropped_with']} as a pair)" if "dropped_with" in u else ""))
-    if doc.get("partial") and not any(n["scope"] != "per_trial" for n in doc["named"]):
+    if doc.get("partial") and not any(map(fitted_entry, doc["named"])):
         print(f"  named: nothing; the library's best account (partial, above) {INADEQUATE}")
-    elif doc.get("unsupported") and not any(n["scope"] != "per_trial" for n in doc["named"]):
+    elif doc.get("unsupported") and not any(map(fitted_entry, doc["named"])):
         print("  named: no global effect; what passed the selection did not pass its interval (above): unexplained")
-    elif doc.get("too_small_to_name") and not any(n["scope"] != "per_trial" for n in doc["named"]):
+    elif doc.get("too_small_to_name") and not any(map(fitted_entry, doc["named"])):
         ts = doc["too_small_to_name"]
         print(f"  named: nothing; the best fit, {ts['effect']} {_params_text(ts)}, is too small to name "
               f"(it changes the model by {ts['net_change_mean_abs']:.3g} in mean |ln k|): unexplained")

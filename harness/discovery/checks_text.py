@@ -27,6 +27,12 @@ def rivals_text(named: dict[str, Any]) -> str:
     return f"barely ahead of {r}" if r else ""
 
 
+def fitted_entry(named: dict[str, Any]) -> bool:
+    """Whether a ``named`` (or ``partial``) entry of ``discovery.json`` is a library effect the screen
+    fitted (scope ``global`` or ``per_cane``), not the obstruction found per trial in the traces."""
+    return named["scope"] != "per_trial"
+
+
 def change_text(named: dict[str, Any]) -> str:
     """``ln k +0.412 (median; +0.105 to +0.873)`` for an effect in ``discovery.json`` that carries
     ``ln_k_change`` (what it alone changes ln k by on the scored trials), else ``""``."""
@@ -137,11 +143,11 @@ def lookalike_notes(named: list[dict[str, Any]], partial: list[dict[str, Any]],
     scored push, along the cane from its base.
     """
     found = [(n, how, names) for names, how in ((named, "named,"), (partial, "fitted but withheld as partial,"))
-             for n in names if n["effect"] == "base_flare" and n["scope"] != "per_trial"]
+             for n in names if n["effect"] == "base_flare" and fitted_entry(n)]
     if not found or not lowest_push_mm:
         return []
     flare, how, names = found[0]
-    root = any(n["effect"] == "root_compliance" and n["scope"] != "per_trial" for n in names)
+    root = any(n["effect"] == "root_compliance" and fitted_entry(n) for n in names)
     lo, hi = min(lowest_push_mm), max(lowest_push_mm)
     where = f"{lo:.0f} mm" if round(lo) == round(hi) else f"{lo:.0f}-{hi:.0f} mm"
     length = flare["params"].get("length_mm")

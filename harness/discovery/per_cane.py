@@ -75,8 +75,6 @@ class PerCaneTest:
     ----------
     effect, parameter, unit
         The effect, the parameter that varies per cane, its unit.
-    global_value
-        The named (global) fit's value.
     median
         exp(mu): the population's median under the hierarchy.
     ln_sd
@@ -96,7 +94,6 @@ class PerCaneTest:
     effect: str
     parameter: str
     unit: str
-    global_value: float
     median: float
     ln_sd: float
     lr: float
@@ -406,6 +403,6 @@ def per_cane_test(at: Anchored, log_k_field: np.ndarray, specs: tuple[EffectSpec
     else:
         reason = (f"{parameter} varies between canes (p = {p:.2g}) but the canes' own values move the model by "
                   f"{spread:.3f} in mean |ln k|, under {min_change:.3g}: kept global")
-    return PerCaneTest(name, parameter, unit, v0, math.exp(x1[0]), omega, lr, p, alpha, spread, per,
+    return PerCaneTest(name, parameter, unit, math.exp(x1[0]), omega, lr, p, alpha, spread, per,
                        {str(c): float(math.exp(v)) for c, v in zip(h.uniq, m)},
                        {str(c): float(s) for c, s in zip(h.uniq, sd)}, reason)

@@ -18,7 +18,7 @@ import pandas as pd
 
 from ..model.effects import EFFECTS
 from .adequacy import geometry_draws, level_trend_geometry, within_dispersion, within_trend_geometry
-from .checks_text import failure_reasons
+from .checks_text import failure_reasons, fitted_entry
 from .fit import Candidate, cross_validate
 from .nulls import at_bound, null_bound
 from .screenset import Anchored
@@ -166,8 +166,8 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
                    or bool(unsupported))
     partial: list[dict[str, Any]] = []
     if adequacy["inadequate"]:
-        partial = [n for n in named if n["scope"] != "per_trial"]
-        named = [n for n in named if n["scope"] == "per_trial"]
+        partial = [n for n in named if fitted_entry(n)]
+        named = [n for n in named if not fitted_entry(n)]
         what = ", ".join(n["effect"] for n in partial) or "the baseline"
         why = failure_reasons(adequacy)
         notes.append(f"the model ({what}) " + "; and it ".join(why) + ": an effect outside the library, or one the "

@@ -108,7 +108,7 @@ from .checks_text import lookalike_notes
 from .contacts import FieldContacts, read_contacts
 from .fit import bootstrap_ci
 from .nulls import ci_of
-from .per_cane import PER_CANE_ALPHA, PerCaneTest, per_cane_test
+from .per_cane import PER_CANE_ALPHA, PerCaneTest, per_cane_test, varying_parameter
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, drop_unsupported, forward_select
 from .structure import between_share
@@ -560,8 +560,6 @@ def scope_per_cane(named: list[dict[str, Any]], fit: Any, at: Anchored, log_k_fi
     """Test each named effect that may be each cane's own for a value per cane (:mod:`.per_cane`),
     at ``alpha`` split over the effects tested; a per-cane one gets ``scope`` ``per_cane`` and its
     canes' values (``local``) in place. Every tested entry carries ``per_cane_test``."""
-    from .per_cane import varying_parameter
-
     tested = [n for n in named if n["scope"] == "global" and varying_parameter(n["effect"])]
     out: dict[str, PerCaneTest] = {}
     for n in tested:
@@ -569,10 +567,9 @@ def scope_per_cane(named: list[dict[str, Any]], fit: Any, at: Anchored, log_k_fi
                           diameter_factor, fit.s2, fit.t2, seed)
         if t is None:
             continue
-        d = t.to_dict()
-        if not t.per_cane:  # shrunk toward the median, the canes' values say nothing a reader needs
-            d.pop("values"), d.pop("ln_sd_each")
-        n["per_cane_test"] = d
+        # kept global, the canes' values (shrunk toward the median) say nothing a reader needs
+        n["per_cane_test"] = {k: v for k, v in t.to_dict().items()
+                              if t.per_cane or k not in ("values", "ln_sd_each")}
         if t.per_cane:
             n["scope"] = "per_cane"
             n["local"] = {c: {t.parameter: v} for c, v in t.values.items()}
