@@ -25,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selftest", action="store_true", help="run the seeded hidden-effect suite instead")
     p.add_argument("--seed", type=int, default=7, help="self-test seed")
     p.add_argument("--workers", type=int, default=2, help="self-test processes")
-    p.add_argument("--selftest-cases", help="self-test: comma-separated globs on case ids (default: all 40)")
+    p.add_argument("--selftest-cases", help="self-test: comma-separated globs on case ids (default: all 42)")
     common.add_executor_options(p, store=False)
     p.set_defaults(fn=main)
 
@@ -55,7 +55,8 @@ def main(a: argparse.Namespace) -> int:
         out = Path(a.out if a.out != "canebench-runs/discover" else "canebench-runs/discover-selftest")
         df = run_selftest(out, a.seed, a.workers, only=a.selftest_cases)
         cols = [c for c in ["id", "named", "partial", "unsupported", "unexplained", "adequacy_p", "size", "gap_before",
-                            "gap_after_cv"] if c in df] + [c for c in df.columns if c.startswith("err_")]
+                            "gap_after_cv", "per_cane", "per_cane_p", "per_cane_r"] if c in df] + [
+            c for c in df.columns if c.startswith("err_")]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
         summary = summarize(df)
         criteria = summary.pop("done_when")
