@@ -1104,6 +1104,65 @@ def test_the_selftest_draws_each_effect_once_in_every_fifth_of_its_range():
             assert sorted(int(5 * (v - lo) / (hi - lo)) for v in x) == [0, 1, 2, 3, 4], (seed, eff, x)
 
 
+def test_the_selftest_per_cane_sets_come_last_and_leave_the_other_cases_as_they_were():
+    """The per-cane roots are drawn after every other case, so a suite with them holds the same
+    first 40 cases (effects, ids, seeds) as one without: stored runs of those stay comparable. Their
+    roots cover PER_CANE_K_ROOT one stratum a set, with a spread in PER_CANE_LN_SD."""
+    from canebench.discovery.selftest import PER_CANE_K_ROOT, PER_CANE_LN_SD, suite
+
+    for seed in (7, 8, 9):
+        cases = suite(seed)
+        assert cases[:-2] == suite(seed, per_cane=0) and len(cases) == 42
+        pc = [c for c in cases if c["kind"] == "per_cane"]
+        assert [c["id"][:2] for c in pc] == ["40", "41"]
+        k = [c["effects"]["root_compliance"]["k_root"] for c in pc]
+        x = np.log(np.array(k) / PER_CANE_K_ROOT[0]) / np.log(PER_CANE_K_ROOT[1] / PER_CANE_K_ROOT[0])
+        assert sorted(int(2 * v) for v in x) == [0, 1], (seed, k)
+        assert all(PER_CANE_LN_SD[0] <= c["effects"]["root_compliance"]["ln_sd"] <= PER_CANE_LN_SD[1] for c in pc)
+
+
+def test_the_selftest_scores_a_per_cane_root_against_the_canes_drawn_roots():
+    """Each cane's value is compared with the generator's root for that cane (in ln), the global
+    value with the drawn roots' geometric mean; a root named with one value for all is not found.
+    Outside the per-cane sets a root per cane is a wrong scope; inside them it is the answer."""
+    from canebench.discovery.selftest import _per_cane_scores, summarize
+
+    drawn = {"b1c1": 10.0, "b1c2": 20.0, "b2c1": 40.0, "b2c2": 80.0}
+    truth = {"canes": {c: {"k_root": v} for c, v in drawn.items()} | {"b3c1": {}}}
+    local = {c: {"k_root": 1.5 * v} for c, v in drawn.items()}  # right ranks, 1.5 times too stiff
+    local["b1c2"]["k_root"] = 20.0 * 1.5 * 2.0  # one cane off by a further factor 2
+    entry = {"scope": "per_cane", "params": {"k_root": 33.0}, "per_cane_test": {"p": 1e-4}, "local": local}
+    sc = _per_cane_scores(entry, truth)
+    a = np.log([1.5 * v for v in drawn.values()]); a[1] += np.log(2.0)
+    b = np.log(list(drawn.values()))
+    assert sc["per_cane_found"] and sc["per_cane_p"] == 1e-4 and sc["per_cane_n"] == 4
+    assert sc["per_cane_r"] == pytest.approx(np.corrcoef(a, b)[0, 1], abs=1e-12)
+    assert sc["per_cane_rms_ln"] == pytest.approx(np.sqrt(np.mean((a - b) ** 2)), abs=1e-12)
+    assert sc["per_cane_err_k_root"] == pytest.approx(33.0 / (10 * 20 * 40 * 80) ** 0.25 - 1.0, abs=1e-12)
+    glob = _per_cane_scores({"scope": "global", "params": {"k_root": 28.3}, "per_cane_test": {"p": 0.3}}, truth)
+    assert not glob["per_cane_found"] and "per_cane_r" not in glob and glob["per_cane_p"] == 0.3
+    assert _per_cane_scores(None, truth) == {"per_cane_found": False}
+
+    base = dict(partial="", size=0.5, gap_before=1.0, unexplained=False)
+    rows = pd.DataFrame([
+        {"kind": "per_cane", "hidden": "root_compliance", "named": "root_compliance", "correct": True,
+         "per_cane": "root_compliance", "gap_after_cv": 0.2, **sc},
+        {"kind": "per_cane", "hidden": "root_compliance", "named": "root_compliance+modulus_scale",
+         "correct": False, "per_cane": "", "gap_after_cv": 0.5, **glob},
+        {"kind": "single", "hidden": "root_compliance", "named": "root_compliance", "correct": True,
+         "per_cane": "root_compliance", "gap_after_cv": 0.4},
+        {"kind": "single", "hidden": "base_flare", "named": "base_flare", "correct": True,
+         "per_cane": "base_flare", "gap_after_cv": 0.4},
+    ]).assign(**base)
+    s = summarize(rows)
+    assert (s["per_cane_scopes"], s["per_cane_scopes_not_flare"]) == (2, 1)  # the single root's scope only
+    assert (s["n_per_cane_sets"], s["per_cane_sets_named_root"], s["per_cane_sets_found_per_cane"]) == (2, "1/2", "1/2")
+    assert s["per_cane_r_median"] == s["per_cane_r_worst"] == pytest.approx(sc["per_cane_r"])
+    assert s["per_cane_median_gap_shrink_out_of_sample"] == pytest.approx(0.8)  # the correctly named set only
+    assert s["correct_rate_all_hidden"] == 1.0  # the issue's rates leave the per-cane sets out
+    assert summarize(rows[rows.kind == "single"])["n_per_cane_sets"] == 0
+
+
 def test_the_selftest_says_where_the_out_of_library_support_touches(tmp_path):
     """A support touching near the base lies below every push of every cane, one near the tip
     above them all; the summary counts the out-of-library sets of the first kind and the names
