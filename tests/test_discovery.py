@@ -1108,10 +1108,16 @@ def test_the_selftest_per_cane_sets_come_last_and_leave_the_other_cases_as_they_
     """The per-cane roots are drawn after every other case, so a suite with them holds the same
     first 40 cases (effects, ids, seeds) as one without: stored runs of those stay comparable. Their
     roots cover PER_CANE_K_ROOT one stratum a set, with a spread in PER_CANE_LN_SD."""
+    import hashlib
+
     from canebench.discovery.selftest import PER_CANE_K_ROOT, PER_CANE_LN_SD, suite
 
+    # the 40 cases of 416b8d5's suite (before the per-cane sets), hashed with that commit's own code:
+    # the stored full runs of seeds 7-9 (README's table) are of exactly these
+    before = {7: "748500ab290d4d20", 8: "1036d0215d2ee3e4", 9: "929bcfec41cc8cb1"}
     for seed in (7, 8, 9):
         cases = suite(seed)
+        assert hashlib.sha256(json.dumps(cases[:40], sort_keys=True).encode()).hexdigest()[:16] == before[seed]
         assert cases[:-2] == suite(seed, per_cane=0) and len(cases) == 42
         pc = [c for c in cases if c["kind"] == "per_cane"]
         assert [c["id"][:2] for c in pc] == ["40", "41"]
@@ -1142,6 +1148,8 @@ def test_the_selftest_scores_a_per_cane_root_against_the_canes_drawn_roots():
     glob = _per_cane_scores({"scope": "global", "params": {"k_root": 28.3}, "per_cane_test": {"p": 0.3}}, truth)
     assert not glob["per_cane_found"] and "per_cane_r" not in glob and glob["per_cane_p"] == 0.3
     assert _per_cane_scores(None, truth) == {"per_cane_found": False}
+    flat = {**entry, "local": {c: {"k_root": 30.0} for c in drawn}}  # one value for all: no correlation
+    assert math.isnan(_per_cane_scores(flat, truth)["per_cane_r"])
 
     base = dict(partial="", size=0.5, gap_before=1.0, unexplained=False)
     rows = pd.DataFrame([

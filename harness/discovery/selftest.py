@@ -279,7 +279,8 @@ def _per_cane_scores(entry: dict[str, Any] | None, truth: dict[str, Any]) -> dic
     if len(local) >= 3:
         a = np.log([local[c] for c in local])
         b = np.log([drawn[c] for c in local])
-        out["per_cane_r"] = float(np.corrcoef(a, b)[0, 1])
+        # one value for every cane (on either side) has no correlation: NaN, not numpy's warning
+        out["per_cane_r"] = float(np.corrcoef(a, b)[0, 1]) if np.ptp(a) > 0 and np.ptp(b) > 0 else math.nan
         out["per_cane_rms_ln"] = float(np.sqrt(np.mean((a - b) ** 2)))
         out["per_cane_n"] = len(local)
     return out
