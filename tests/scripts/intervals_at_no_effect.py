@@ -9,6 +9,7 @@ import json
 import sys
 from pathlib import Path
 
+from canebench.discovery.checks_text import fitted_entry
 from canebench.discovery.nulls import covers_null
 from canebench.model.effects import EffectSpec
 
@@ -18,7 +19,7 @@ for root in sys.argv[1:]:
         doc = json.loads(f.read_text())
         n_files += 1
         for n in doc["named"]:
-            if n["scope"] == "per_trial":
+            if not fitted_entry(n):
                 continue
             n_named += 1
             spec = EffectSpec(n["effect"], tuple(n["params"].items()))

@@ -54,6 +54,7 @@ def one(job: tuple[str, str]) -> dict:
 def _one(spec: str, out: str) -> dict:
     import canebench.discovery.workflow as wf
     from canebench.data.dataset import load_dataset
+    from canebench.discovery.checks_text import fitted_entry
     from canebench.discovery.selftest import COMPARED
     from canebench.execute.executors import make_executor
 
@@ -74,7 +75,7 @@ def _one(spec: str, out: str) -> dict:
         wf.bootstrap_ci = real
     doc = res.to_json()
     truth = json.loads(truth_file.read_text())["effects"]
-    named = [n for n in doc["named"] if n["scope"] != "per_trial"]
+    named = [n for n in doc["named"] if fitted_entry(n)]
     row = {"case": name, "hidden": "+".join(truth) or "none", "named": "+".join(n["effect"] for n in doc["named"]),
            "n_boot": n_boot, "seed": seed, "why_not": ""}
     if not calls or len(named) != 1 or len(named) != len(doc["named"]):

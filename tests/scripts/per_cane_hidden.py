@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from canebench.canes.generate_hidden import generate_hidden
-from canebench.discovery.checks_text import scope_text
-from canebench.discovery.selftest import discover_case
+from canebench.discovery.checks_text import fitted_entry, scope_text
+from canebench.discovery.selftest import _per_cane_scores, discover_case
 
 
 def main(out: Path, seed: int, k: float, ln_sd: float) -> None:
@@ -31,19 +31,17 @@ def main(out: Path, seed: int, k: float, ln_sd: float) -> None:
         print(f"{tag}: generator's k_root median {np.exp(np.median(lk)):.3g}, ln sd {lk.std(ddof=1):.2f} over "
               f"{len(kt)} canes")
         for n in res.named:
-            if n["scope"] == "per_trial":
+            if not fitted_entry(n):
                 continue
             print(f"  named {n['effect']} {n['params']} ci95 {n.get('ci95')}; {scope_text(n)}")
             t = n.get("per_cane_test")
             if t:
                 print(f"  test: LR {t['lr']:.2f}, p {t['p']:.2g}, ln sd {t['ln_sd_between_canes']:.2f}, median "
                       f"{t['median']:.3g}, spread {t['spread_mean_abs_ln_k']:.3f}")
-            if "local" in n:
-                c = sorted(n["local"])
-                a = np.log([n["local"][x][t["parameter"]] for x in c])
-                b = np.log([kt[x] for x in c])
-                print(f"  each cane's k_root against the generator's: r {np.corrcoef(a, b)[0, 1]:.2f}, rms "
-                      f"{np.sqrt(np.mean((a - b) ** 2)):.2f} in ln")
+            if "local" in n and n["effect"] == "root_compliance":
+                sc = _per_cane_scores(n, truth)  # the self-test's own scoring of a per-cane root
+                print(f"  each cane's k_root against the generator's: r {sc.get('per_cane_r', np.nan):.2f}, rms "
+                      f"{sc.get('per_cane_rms_ln', np.nan):.2f} in ln")
         tr = res.trials
         left = tr[tr.not_scored != ""]
         print(f"  scored: {int((tr.not_scored == '').sum())} trials on {tr[tr.not_scored == ''].cane.nunique()} canes"

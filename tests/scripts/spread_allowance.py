@@ -26,6 +26,7 @@ import os
 import sys
 
 from canebench.discovery.adequacy import within_dispersion
+from canebench.discovery.checks_text import fitted_entry
 from canebench.discovery.verdict import WITHIN_EXCESS, WITHIN_FLOOR
 from compare_discoveries import discovery_files  # beside this script
 
@@ -44,7 +45,7 @@ def load(roots: list[str]) -> list[dict]:
             folder = os.path.dirname(f)
             row_f = os.path.join(folder, "selftest_row.json")
             st = json.load(open(row_f))["row"] if os.path.exists(row_f) else None
-            named = [n["effect"] for n in d.get("named", []) if n.get("scope") != "per_trial"]
+            named = [n["effect"] for n in d.get("named", []) if fitted_entry(n)]
             sets.append({"set": os.path.relpath(folder, os.path.dirname(os.path.abspath(root).rstrip("/"))),
                          "sd": float(wd.get("sd", float("nan"))),
                          "geometry_sd": float(wd.get("geometry_sd", float("nan"))),

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from canebench.data.dataset import load_dataset
+from canebench.discovery.checks_text import fitted_entry
 from canebench.model.diameter import fit_diameter
 
 
@@ -35,7 +36,7 @@ def moments(w: np.ndarray, s: np.ndarray) -> tuple[float, float, float]:
 
 data = Path(sys.argv[1])
 doc = json.loads(Path(sys.argv[2] if len(sys.argv) > 2 else data / "out" / "discovery.json").read_text())
-params = {n["effect"]: n["params"] for n in doc["named"] if n["scope"] != "per_trial"}
+params = {n["effect"]: n["params"] for n in doc["named"] if fitted_entry(n)}
 flare, root = params.get("base_flare"), params.get("root_compliance")
 truth_path = data / "truth" / "truth.json"
 support = json.loads(truth_path.read_text())["effects"].get("lateral_support") if truth_path.exists() else None

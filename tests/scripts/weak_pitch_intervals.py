@@ -12,6 +12,7 @@ from pathlib import Path
 
 from canebench.canes.generate_hidden import generate_hidden
 from canebench.data.dataset import load_dataset
+from canebench.discovery.checks_text import fitted_entry
 from canebench.discovery.selftest import _effect_size
 from canebench.discovery.workflow import discover
 from canebench.execute.executors import make_executor
@@ -28,6 +29,6 @@ for i, angle in enumerate(ANGLES):
     res = discover(load_dataset(d), confirm=False, executor=make_executor("serial", 1, None), n_boot=100,
                    out=out / f"pitch{angle:+.0f}" / "out")
     print(f"hidden {angle:+.0f} deg (median |d ln k| {_effect_size(d):.3f}): "
-          f"named {[(n['effect'], n['params'], n.get('ci95')) for n in res.named if n['scope'] != 'per_trial']}; "
+          f"named {[(n['effect'], n['params'], n.get('ci95')) for n in res.named if fitted_entry(n)]}; "
           f"refused {[(u['effect'], u['params'], u['ci95']) for u in res.unsupported]}; "
           f"unexplained {res.unexplained}", flush=True)
