@@ -429,6 +429,49 @@ def test_an_anchored_screen_is_the_same_screen_moved_to_the_anchor(bundled_trial
     assert np.all(thick > lka + 1e-4) and np.all(thick < -np.log(cane / 1.1**4 + 1e3 / 300.0))
 
 
+def test_the_screen_s_per_trial_sums_are_its_pass_over_every_point(bundled_trials):
+    """A model that leaves the diameter alone is evaluated from three sums per trial; one that
+    changes it, by a pass over every quadrature point. A flare with no excess changes nothing, so
+    the two paths must agree to rounding, with the probe pitched, the modulus scaled and a root
+    (the kernel's cross term and the 1/E act before and after the sums), and after a cut of the
+    screen and new diameters (each starts without the sums of the screen it came from)."""
+    from canebench.discovery.screen import trial_geometry
+    from canebench.discovery.screenset import ScreenSet
+    from canebench.model.effects import AppliedEffects, EffectSpec
+    from canebench.model.presets import PRESETS
+
+    ss = ScreenSet.build([trial_geometry(t, PRESETS["beam-consistent"]) for t in bundled_trials[:9]])
+    rest = [EffectSpec.parse(e) for e in ("probe_misalignment(angle_deg=23)", "modulus_scale(scale=0.7)",
+                                          "root_compliance(k_root=35)")]
+    fast = AppliedEffects([s.instance() for s in rest])
+    slow = AppliedEffects([s.instance() for s in rest + [EffectSpec.parse("base_flare(excess_mm=0)")]])
+    assert slow.changes_diameter and not fast.changes_diameter
+    for scr in (ss, ss.take(np.array([4, 4, 1])), ss.with_diameters(ss.d0 * 1.2)):
+        np.testing.assert_allclose(scr.compliance(fast)[0], scr.compliance(slow)[0], rtol=1e-12, atol=0)
+    # points not laid out a run per trial (summed by bincount instead) give the same sums
+    from dataclasses import replace
+
+    perm = np.random.default_rng(0).permutation(len(ss.s))
+    mixed = replace(ss, **{k: getattr(ss, k)[perm] for k in ("idx", "s", "w", "d0", "kaa", "kae", "kee")})
+    for fx in (fast, slow):
+        np.testing.assert_allclose(mixed.compliance(fx)[0], ss.compliance(fx)[0], rtol=1e-12, atol=0)
+    # 20 % thicker everywhere: the cane's part of the compliance falls by 1.2^4, the root's stays
+    no_root = AppliedEffects([s.instance() for s in rest[:2]])
+    np.testing.assert_allclose(ss.with_diameters(ss.d0 * 1.2).compliance(no_root)[0],
+                               ss.compliance(no_root)[0] / 1.2**4, rtol=1e-12)
+
+
+def test_the_held_out_gain_s_sign_test_leaves_rounding_out():
+    """Per-cane gains of a candidate fitted at its null value are rounding (1e-16): they are ties,
+    not 18 canes' worth of evidence. Twelve canes that all gain are significant (exact p 2^-12)."""
+    from canebench.discovery.fit import sign_flip_p
+
+    rng = np.random.default_rng(3)
+    assert sign_flip_p(rng.normal(0.0, 1e-16, 18)) == 1.0
+    assert sign_flip_p(np.linspace(0.01, 0.12, 12)) == pytest.approx(2.0**-12)
+    assert sign_flip_p(-np.linspace(0.01, 0.12, 12)) == pytest.approx(1.0)
+
+
 @pytest.mark.field
 def test_onset_on_the_real_elbow(field_dir):
     from canebench.data.dataset import load_dataset
@@ -1661,6 +1704,8 @@ def test_a_flare_must_read_what_the_calipers_read(bundled_trials):
     the calipers" means (a third of the term's weight would let it reach 1.3). Every trial
     carries its own cane's calipers, through folds and resamples, and a cane counts once; a
     diameter factor scales the line, not the calipers' scatter."""
+    from dataclasses import replace
+
     from canebench.discovery.fit import Candidate, fit_candidate
     from canebench.discovery.screen import trial_geometry
     from canebench.discovery.screenset import Anchored, ScreenSet
@@ -1682,8 +1727,7 @@ def test_a_flare_must_read_what_the_calipers_read(bundled_trials):
     assert at_cal.min() > 3 * ss.cal_sigma  # the calipers would have seen it
     canes, inv = np.unique(ss.canes, return_inverse=True)
     lkf = Anchored(ss, lkb).predict((long_thin,)) + np.random.default_rng(3).normal(0, 0.05, len(canes))[inv]
-    plain = ScreenSet(**{**ss.__dict__, "cal_idx": ss.cal_idx[:0], "cal_s": ss.cal_s[:0],
-                         "cal_line": ss.cal_line[:0], "cal_w": ss.cal_w[:0]})
+    plain = replace(ss, cal_idx=ss.cal_idx[:0], cal_s=ss.cal_s[:0], cal_line=ss.cal_line[:0], cal_w=ss.cal_w[:0])
 
     def change_at_calipers(fit):
         f = AppliedEffects([s.instance() for s in fit.specs])

@@ -137,21 +137,32 @@ class Candidate:
         return [np.array(v) for v in zip(*(m.ravel() for m in mesh))]
 
 
-def variance_components(r: np.ndarray, groups: np.ndarray) -> tuple[float, float]:
-    """(sigma^2, tau^2) of the zero-mean random-intercept model, closed form."""
-    uniq, inv, counts = np.unique(groups, return_inverse=True, return_counts=True)
+def group_index(groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's group (0.. in sorted order of the labels) and each group's row count: what
+    :func:`variance_components` and :func:`group_nll` need of the labels, taken once by a fit that
+    calls them at every evaluation."""
+    _, inv, counts = np.unique(groups, return_inverse=True, return_counts=True)
+    return inv, counts
+
+
+def variance_components(r: np.ndarray, groups: np.ndarray,
+                        index: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, float]:
+    """(sigma^2, tau^2) of the zero-mean random-intercept model, closed form (``index``:
+    :func:`group_index` of ``groups``, if at hand)."""
+    inv, counts = index if index is not None else group_index(groups)
     means = np.bincount(inv, r) / counts
     ssw = float(np.sum((r - means[inv]) ** 2))
-    dfw = len(r) - len(uniq)
+    dfw = len(r) - len(counts)
     s2 = max(ssw / dfw if dfw > 0 else float(np.mean(r**2)), SIGMA_FLOOR**2)
     nbar = float(np.mean(counts))
     t2 = max(0.0, float(np.mean(counts * means**2)) / nbar - s2 / nbar)
     return s2, t2
 
 
-def group_nll(r: np.ndarray, groups: np.ndarray, s2: float, t2: float) -> np.ndarray:
+def group_nll(r: np.ndarray, groups: np.ndarray, s2: float, t2: float,
+              index: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """-log density of each group's residual vector under N(0, s2 I + t2 11^T)."""
-    uniq, inv, counts = np.unique(groups, return_inverse=True, return_counts=True)
+    inv, counts = index if index is not None else group_index(groups)
     sums = np.bincount(inv, r)
     sq = np.bincount(inv, r**2)
     n = counts.astype(float)
@@ -160,9 +171,10 @@ def group_nll(r: np.ndarray, groups: np.ndarray, s2: float, t2: float) -> np.nda
     return 0.5 * (quad + logdet + n * math.log(2 * math.pi))
 
 
-def nll(r: np.ndarray, groups: np.ndarray) -> float:
-    s2, t2 = variance_components(r, groups)
-    return float(np.sum(group_nll(r, groups, s2, t2)))
+def nll(r: np.ndarray, groups: np.ndarray, index: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+    index = index if index is not None else group_index(groups)
+    s2, t2 = variance_components(r, groups, index)
+    return float(np.sum(group_nll(r, groups, s2, t2, index)))
 
 
 @dataclass
@@ -193,6 +205,7 @@ def fit_candidate(cand: Candidate, at: Anchored, log_k_field: np.ndarray,
     """Maximum likelihood of ``cand``'s free parameters (with ``fixed`` effects in place), predicting
     from the screen ``at``; ``at.log_k`` and ``log_k_field`` are in the same trial order."""
     groups = at.screen.canes
+    index = group_index(groups)
     # the calipers are data too: a diameter effect may not contradict their readings (whether one
     # is in the fit depends on the effects' names only, not on the parameter values tried)
     x_any = np.zeros(len(cand.free))
@@ -204,7 +217,7 @@ def fit_candidate(cand: Candidate, at: Anchored, log_k_field: np.ndarray,
         if not np.all(np.isfinite(r)):
             return 1e12
         penalty = at.screen.caliper_nll(AppliedEffects([s.instance() for s in specs])) if diameter else 0.0
-        return nll(r, groups) + penalty
+        return nll(r, groups, index) + penalty
 
     if not cand.free:
         v = obj(np.zeros(0))
@@ -279,6 +292,10 @@ def flip_p(null: np.ndarray, obs: float, exact: bool, tol: float = 1e-12) -> flo
     return float(hits / len(null)) if exact else float((hits + 1) / (len(null) + 1))
 
 
+#: a per-cane gain (mean |ln k| ratio) this close to 0 is rounding, not a gain (:func:`sign_flip_p`)
+GAIN_TIE = 1e-12
+
+
 def sign_flip_p(diff: np.ndarray, n_perm: int = 20000, seed: int = 0) -> float:
     """One-sided p that the per-cane gains ``diff`` are centred above 0.
 
@@ -286,9 +303,12 @@ def sign_flip_p(diff: np.ndarray, n_perm: int = 20000, seed: int = 0) -> float:
     random sign flips: exact enumeration up to 16 canes, Monte Carlo beyond.
     Ranks, not the gains themselves, so one cane with a huge gain cannot
     carry the test, and twelve canes that all improve are significant.
+    A gain within :data:`GAIN_TIE` of 0 is a tie and left out: a candidate fitted at its null
+    value differs from the current model by rounding only, and the signs of rounding are no
+    evidence either way.
     """
     d = np.asarray(diff, float)
-    d = d[d != 0]
+    d = d[np.abs(d) > GAIN_TIE]
     n = len(d)
     if n == 0:
         return 1.0

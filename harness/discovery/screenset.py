@@ -115,6 +115,11 @@ class ScreenSet:
     pitch_coef: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     #: the extra probe pitch (deg) of the anchor's model
     anchor_pitch_deg: float = 0.0
+    #: (3, g) each quadrature point's w k_aa, w k_ae, w k_ee times 64/pi, and where each trial's points
+    #: start (:meth:`_per_trial`); not init fields, so every ``replace`` starts without them
+    _weights: tuple | None = field(default=None, init=False, repr=False, compare=False)
+    #: (3, n) :meth:`_per_trial` on the caliper line's diameters, once per screen
+    _sums: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @classmethod
     def build(cls, geoms: list[TrialGeometry]) -> "ScreenSet":
@@ -229,15 +234,42 @@ class ScreenSet:
         """What the effects ``fx`` change the diameter by (m) at every caliper of every trial."""
         return fx.diameter(self.cal_s, self.cal_line) - self.cal_line
 
-    def compliance(self, fx: AppliedEffects) -> tuple[np.ndarray, np.ndarray]:
-        """(cane compliance (n,), series compliance (scalar)) under ``fx`` (global values)."""
+    def _per_trial(self, d: np.ndarray) -> np.ndarray:
+        """(3, n): each trial's sums over its quadrature points of w k_aa / I, w k_ae / I and w k_ee / I
+        at the diameters ``d`` (one per point; I = pi d^4 / 64)."""
         n = len(self.trials)
+        if self._weights is None:
+            W = np.stack([self.w * self.kaa, self.w * self.kae, self.w * self.kee]) * (64.0 / np.pi)
+            counts = np.bincount(self.idx, minlength=n)
+            # every trial's points in one run, in trial order (as build and take lay them out): a
+            # segmented sum; otherwise a bincount per row
+            runs = bool(np.all(counts > 0)) and np.array_equal(self.idx, np.repeat(np.arange(n), counts))
+            self._weights = (W, np.concatenate([[0], np.cumsum(counts)[:-1]]) if runs else None)
+        W, starts = self._weights
+        d2 = d * d
+        X = W / (d2 * d2)
+        if starts is None:
+            return np.stack([np.bincount(self.idx, x, minlength=n) for x in X])
+        return np.add.reduceat(X, starts, axis=1)
+
+    def compliance(self, fx: AppliedEffects) -> tuple[np.ndarray, np.ndarray]:
+        """(cane compliance (n,), series compliance (scalar)) under ``fx`` (global values).
+
+        The probe's pitch enters each trial's kernel only through (cos th, sin th), so the cane's
+        compliance is three sums per trial (:meth:`_per_trial`) in those. A model that leaves the
+        diameter alone takes the caliper line's sums, computed once per screen: the fits call this
+        tens of thousands of times, and a pass over every quadrature point (about 700 a trial) was
+        most of a discovery run's time. An effect on the diameter takes that pass."""
         E = np.asarray(fx.modulus(self.E), float)
-        d = np.maximum(fx.diameter(self.s, self.d0), self.min_d)
         th = self.th0 + np.deg2rad(fx.probe_pitch_deg())
         c, sn = np.cos(th), np.sin(th)
-        kern = self.kaa * c[self.idx] ** 2 + self.kae * (c * sn)[self.idx] + self.kee * sn[self.idx] ** 2
-        cc = np.bincount(self.idx, self.w * kern / (np.pi * d**4 / 64.0), minlength=n) / E
+        if fx.changes_diameter:
+            A = self._per_trial(np.maximum(fx.diameter(self.s, self.d0), self.min_d))
+        else:
+            if self._sums is None:
+                self._sums = self._per_trial(np.maximum(self.d0, self.min_d))
+            A = self._sums
+        cc = (A[0] * c**2 + A[1] * (c * sn) + A[2] * sn**2) / E
         c_root = fx.root_compliance()
         if c_root:
             cc = cc + (self.raa * c**2 + self.rae * c * sn + self.ree * sn**2) * c_root
