@@ -1214,6 +1214,70 @@ def test_the_selftest_scores_a_per_cane_root_against_the_canes_drawn_roots():
     assert summarize(rows[rows.kind == "single"])["n_per_cane_sets"] == 0
 
 
+def test_run_case_scores_each_kind_from_the_discovery_it_ran_and_reuses_a_finished_row(tmp_path, monkeypatch):
+    """The wiring between a case, its truth and its discovery (the discovery and the generator are
+    stand-ins here; both have tests of their own): a per-cane set is scored per cane and has no
+    ``err_k_root`` (its root has no one true value); a single root is scored against the drawn
+    value with its interval; a finished row is read back, not recomputed."""
+    from pathlib import Path
+
+    from canebench.discovery import selftest
+
+    canes = {f"b1c{i}": 10.0 * 2**i for i in range(1, 5)}  # each cane's drawn root (N m/rad)
+
+    def fake_generate(folder, case, max_draws=24):
+        trials = {f"{c}t1": {"k_effect_n_per_mm": 0.1, "k_plain_n_per_mm": 0.2, "s": 0.3} for c in canes}
+        truth = {"effects": case["effects"],
+                 "canes": {c: {**({"k_root": k} if case["kind"] == "per_cane" else {}),
+                               "trials": {f"{c}t1": trials[f"{c}t1"]}} for c, k in canes.items()}}
+        (folder / "truth").mkdir(parents=True)
+        (folder / "truth" / "truth.json").write_text(json.dumps(truth))
+
+    docs, calls = {}, []
+
+    class Result:
+        def __init__(self, doc):
+            self.doc, self.trials = doc, pd.DataFrame({"trial": list(canes)})
+
+        def to_json(self):
+            return self.doc
+
+    def fake_discover(folder, seed):
+        calls.append(Path(folder).name)
+        return Result(docs[Path(folder).name])
+
+    monkeypatch.setattr(selftest, "_generate_case", fake_generate)
+    monkeypatch.setattr(selftest, "discover_case", fake_discover)
+    gap = {"before": {"median_abs_log_ratio": 1.0}, "after_cv": {"median_abs_log_ratio": 0.3}}
+    # each cane's value twice its drawn root: r 1, rms ln 2, the global 40 against the drawn roots'
+    # geometric mean of 10 * 2^2.5
+    local = {c: {"k_root": 2 * k} for c, k in canes.items()}
+    docs["40-per_cane"] = {"named": [{"effect": "root_compliance", "scope": "per_cane", "params": {"k_root": 40.0},
+                                      "ci95": {"k_root": [30.0, 50.0]}, "local": local,
+                                      "per_cane_test": {"p": 1e-6}}],
+                           "unexplained": False, "gap": gap, "selection": []}
+    docs["05-single"] = {"named": [{"effect": "root_compliance", "scope": "global", "params": {"k_root": 24.0},
+                                    "ci95": {"k_root": [21.0, 27.0]}}],
+                         "unexplained": False, "gap": gap, "selection": []}
+    pc = selftest.run_case({"id": "40-per_cane", "kind": "per_cane", "seed": 1,
+                            "effects": {"root_compliance": {"k_root": 40.0, "ln_sd": 0.6}}}, str(tmp_path))
+    assert pc["correct"] and pc["per_cane"] == "root_compliance" and pc["per_cane_found"]
+    assert (pc["per_cane_p"], pc["per_cane_n"]) == (1e-6, 4)
+    assert pc["per_cane_r"] == pytest.approx(1.0) and pc["per_cane_rms_ln"] == pytest.approx(math.log(2))
+    assert pc["per_cane_err_k_root"] == pytest.approx(abs(40.0 / (10.0 * 2**2.5) - 1))
+    assert "err_k_root" not in pc and "ci_covers_k_root" not in pc
+    assert pc["size"] == pytest.approx(math.log(2)) and pc["gap_after_cv"] == 0.3
+    single = selftest.run_case({"id": "05-single", "kind": "single", "seed": 2,
+                                "effects": {"root_compliance": {"k_root": 20.0}}}, str(tmp_path))
+    assert single["correct"] and single["per_cane"] == "" and "per_cane_found" not in single
+    assert single["err_k_root"] == pytest.approx(0.2) and single["ci_covers_k_root"] is False
+    assert calls == ["40-per_cane", "05-single"]
+    again = selftest.run_case({"id": "40-per_cane", "kind": "per_cane", "seed": 1,
+                               "effects": {"root_compliance": {"k_root": 40.0, "ln_sd": 0.6}}}, str(tmp_path))
+    assert json.dumps(again, sort_keys=True) == json.dumps(pc, sort_keys=True)  # NaN != NaN in a dict
+    assert calls == ["40-per_cane", "05-single"]
+
+
 def test_the_selftest_says_where_the_out_of_library_support_touches(tmp_path):
     """A support touching near the base lies below every push of every cane, one near the tip
     above them all; the summary counts the out-of-library sets of the first kind and the names
