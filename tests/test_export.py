@@ -383,6 +383,94 @@ def test_what_is_drawn_has_the_documented_distribution(data):
         assert all(d.config.modulus_pa == d.record["modulus_pa"] for d in draws[k::2])
 
 
+PER_CANE_MODEL = """\
+canebench_model: 1
+preset: beam-consistent
+effects:
+  - effect: root_compliance
+    scope: per_cane
+    params: {k_root: 30.0}
+    local: {b1c1: {k_root: 5.0}, b2c1: {k_root: 200.0}}
+    between_canes: {k_root: {median: 25.0, ln_sd: 0.6}}
+  - {effect: modulus_scale, params: {scale: 0.8}}
+"""
+
+
+def test_a_population_draws_a_per_cane_effect_from_its_spread_between_canes(tmp_path, data):
+    """A root fitted per cane (discovery's model file) gives each member a root drawn from the fitted
+    log-normal, not the source cane's own value nor the global one; the other draws (modulus,
+    calipers) are those of the same seed without it; the drawn value reaches the chain and the
+    manifest."""
+    from canebench.export.bundle import export_population, select
+    from canebench.export.population import draw_population
+    from canebench.model.modelfile import load_model_file
+
+    path = tmp_path / "model.yaml"
+    path.write_text(PER_CANE_MODEL)
+    cfg = load_model_file(path)
+    root = next(e for e in cfg.effects if e.name == "root_compliance")
+    assert root.between == (("k_root", (25.0, 0.6)),) and root.scope == "per_cane"
+    sel = [x for x in select(data, by_trial=False) if x[0].id in ("b1c1", "b2c1")]
+    n = 4000
+    draws = draw_population(sel, cfg, n, seed=9)
+    k = np.array([d.record["effects_drawn"]["root_compliance"]["k_root"] for d in draws])
+    # log-normal(ln 25, 0.6): the mean of ln k within 4 standard errors, its sd within 5 %
+    assert abs(np.log(k).mean() - np.log(25.0)) < 4 * 0.6 / np.sqrt(n)
+    assert abs(np.log(k).std(ddof=1) / 0.6 - 1) < 0.05
+    # each member's chain takes its own drawn root (global, no cane's local value) and the scale as is
+    for d in draws[:4]:
+        specs = {e.name: e for e in d.config.effects}
+        assert dict(specs["root_compliance"].params) == {"k_root": d.record["effects_drawn"]["root_compliance"]["k_root"]}
+        assert not specs["root_compliance"].local and not specs["root_compliance"].between
+        assert specs["modulus_scale"] == next(e for e in cfg.effects if e.name == "modulus_scale")
+        fx = d.config.applied_effects(d.cane.id, None)
+        assert fx.root_compliance() == pytest.approx(1.0 / d.record["effects_drawn"]["root_compliance"]["k_root"])
+    # the modulus and calipers are the draws of the same seed with a model that has no spread
+    plain = draw_population(sel, cfg.replace(effects=()), 6, seed=9)
+    for a, b in zip(draws[:6], plain):
+        assert a.record["modulus_pa"] == b.record["modulus_pa"]
+        assert a.record["caliper_diameters_m"] == b.record["caliper_diameters_m"]
+        assert "effects_drawn" not in b.record
+    # the manifest carries the drawn value, and the exported chain is stiffer with the stiffer root
+    res = export_population(sel, cfg, tmp_path / "pop", 6, seed=9, formats="mjcf")
+    man = res.manifest
+    np.testing.assert_allclose(man["root_compliance.k_root"], k[:6])
+    assert "between_canes" in res.header["what_is_drawn"]
+    from canebench.export.bundle import _k_linear
+    from canebench.model.effects import EffectSpec
+
+    for d, row in zip(draws[:6], man.itertuples()):
+        member = build_chain(d.cane, d.push_id, d.config)
+        assert row.k_linear_N_per_mm == pytest.approx(_k_linear(member) * 1e-3, rel=1e-12)
+        # against the same member on the global root (30): stiffer exactly when its drawn root is
+        at_30 = d.config.replace(effects=tuple(EffectSpec("root_compliance", (("k_root", 30.0),))
+                                               if e.name == "root_compliance" else e for e in d.config.effects))
+        assert (_k_linear(member) > _k_linear(build_chain(d.cane, d.push_id, at_30))) == (k[d.index] > 30.0)
+
+
+def test_between_canes_in_a_model_file_is_checked_and_survives_a_round_trip(tmp_path):
+    from canebench.errors import InputError
+    from canebench.model.modelfile import load_model_file, write_model_file
+
+    path = tmp_path / "model.yaml"
+    path.write_text(PER_CANE_MODEL)
+    cfg = load_model_file(path)
+    write_model_file(tmp_path / "again.yaml", cfg, preset="beam-consistent")
+    assert load_model_file(tmp_path / "again.yaml").effects == cfg.effects
+    # a trial's model (job keys) does not carry it: the same physics whatever the spread
+    assert all(not e.between for e in cfg.localized("b1c1", "b1c1t1").effects)
+    for bad, field in (("{k_root: {median: -3, ln_sd: 0.5}}", "k_root.median"),
+                       ("{k_root: {median: 20, ln_sd: .nan}}", "k_root.ln_sd"),
+                       ("{k_rot: {median: 20, ln_sd: 0.5}}", "between_canes.k_rot"),
+                       ("{k_root: {median: 20}}", "k_root"),
+                       ("{k_root: {median: twenty, ln_sd: 0.5}}", "k_root"),
+                       ("[20, 0.5]", "between_canes")):
+        path.write_text(PER_CANE_MODEL.replace("{k_root: {median: 25.0, ln_sd: 0.6}}", bad))
+        with pytest.raises(InputError) as exc:
+            load_model_file(path)
+        assert str(path) in str(exc.value) and field in str(exc.value), (bad, str(exc.value))
+
+
 # ------------------------------------------------------------------ bad input
 
 

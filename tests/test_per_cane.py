@@ -199,6 +199,8 @@ def test_a_per_cane_value_reaches_each_canes_trials_through_the_model_file(tmp_p
     f = write_model_file(tmp_path / "model.yaml", cfg, "beam-consistent")
     back = load_model_file(f)
     assert back.effects[0].scope == "per_cane"
+    # and the hierarchy's median and spread, what a population export draws a new cane's value from
+    assert back.effects[0].between == (("k_root", (21.0, 0.6)),)
     for cane, k in (("b1c1", 8.0), ("b1c2", 55.0), ("b9c9", 20.0)):
         (e,) = back.localized(cane, f"{cane}t1").effects
         assert e.instance().root_compliance() == pytest.approx(1.0 / k)
@@ -296,6 +298,8 @@ def test_discover_gives_each_cane_its_own_root_where_the_generator_hides_one_per
     cfg = load_model_file(tmp_path / "out_per_cane" / "model.yaml")
     (e,) = [s for s in cfg.effects if s.name == "root_compliance"]
     assert e.scope == "per_cane" and set(dict(e.local)) == set(c)
+    pct = root["per_cane_test"]
+    assert e.between == (("k_root", (pytest.approx(pct["median"]), pytest.approx(pct["ln_sd_between_canes"]))),)
     # beside them the global fit's value, which a cane not in the data takes; the engines ran that
     # global model, and the provenance records it (no canes' values)
     assert dict(e.params)["k_root"] == pytest.approx(root["params"]["k_root"])

@@ -121,12 +121,13 @@ class PerCaneTest:
     def spec(self, named: EffectSpec) -> EffectSpec:
         """``named`` with the scope this test found: per cane, each cane's own value as ``local``
         beside the global fit's value, which a cane the data do not have takes (the value the
-        engines confirm, whose interval is drawn and whose gap is measured out of sample); else
-        ``named`` unchanged."""
+        engines confirm, whose interval is drawn and whose gap is measured out of sample), and the
+        hierarchy's median and spread as ``between`` (what a population export draws a new cane's
+        value from); else ``named`` unchanged."""
         if not self.per_cane:
             return named
         local = tuple(sorted((c, ((self.parameter, v),)) for c, v in self.values.items()))
-        return EffectSpec(named.name, named.params, local, "per_cane")
+        return EffectSpec(named.name, named.params, local, "per_cane", ((self.parameter, (self.median, self.ln_sd)),))
 
 
 def varying_parameter(name: str) -> str | None:

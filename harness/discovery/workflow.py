@@ -583,7 +583,9 @@ def per_cane_note(per_cane: Mapping[str, PerCaneTest]) -> str:
         f"{t.effect}: {t.reason}; each cane's {t.parameter} ({min(t.values.values()):.4g} to "
         f"{max(t.values.values()):.4g} {t.unit}; their median {t.median:.4g}) is in model.yaml (local); a cane "
         f"not in the data takes the global fit's value, the one the engines confirm and the interval and the "
-        f"gap out of sample are of" for t in per_cane.values())
+        f"gap out of sample are of; a population export (canebench export --model model.yaml --population N) "
+        f"draws each new cane's {t.parameter} from median {t.median:.4g} and ln sd {t.ln_sd:.2f} (between_canes)"
+        for t in per_cane.values())
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:

@@ -99,6 +99,8 @@ def _row(chain: Chain, name: str, files: dict[str, str], draw: dict[str, Any] | 
     row["diameter_factor"] = (info["config"] or {}).get("diameter_factor")
     if draw:
         row.update({k: draw[k] for k in ("caliper_sd_m", "caliper_scales", "diameter_scale_mean")})
+        # an effect drawn from its spread between canes: one column per parameter, e.g. root_compliance.k_root
+        row.update({f"{e}.{p}": v for e, ps in draw.get("effects_drawn", {}).items() for p, v in ps.items()})
     row.update({"n_links": chain.n_links, "n_joints": chain.n_dof, "k_linear_N_per_mm": _k_linear(chain) * 1e-3,
                 "chain_fingerprint": info["chain_fingerprint"], **{f"file_{k}": v for k, v in files.items()},
                 "synthetic": info["synthetic"], "assumptions": "; ".join(info["assumptions"]),

@@ -19,8 +19,15 @@ draws:
   when it has 3 or more calipers). A redrawn reading is kept at or above
   half the original (never reached at 0.15 mm on millimetre canes).
 
+* **effects that vary between canes**: an effect whose model file gives its spread between canes
+  (``between_canes``: discovery's per-cane root or collar, a log-normal with the fitted median and
+  ln sd) takes a value drawn from it, as a new cane would, from a stream of its own (seeded
+  ``[S, i, 1]``, so the draws above are those of a model without it). The canes' own fitted values
+  (``local``) are not used: a member is a new cane on a measured cane's geometry, as its modulus
+  is drawn and not that cane's.
+
 Everything else (geometry, density, damping, discretization, formula,
-effects) is the model configuration's, unchanged.
+other effects) is the model configuration's, unchanged.
 """
 
 from __future__ import annotations
@@ -44,7 +51,9 @@ MAX_POPULATION = 1_000_000
 WHAT_IS_DRAWN = (
     "per draw i (rng seeded [seed, i]): cane = selection[i mod n]; modulus E ~ the named modulus distribution; "
     "each caliper diameter d_k + sigma e_k, e_k ~ N(0, 1), sigma = max(caliper_sd_m, the cane's diameter-fit "
-    "residual sd), the diameter line refit through the drawn readings; everything else from the model configuration"
+    "residual sd), the diameter line refit through the drawn readings; an effect with a spread between canes "
+    "(between_canes) its value ~ median exp(ln_sd z) from a stream seeded [seed, i, 1], no cane's own value; "
+    "everything else from the model configuration"
 )
 
 
@@ -117,5 +126,11 @@ def draw_population(selection: list[tuple[CaneDescription, str]], config: ModelC
             "caliper_sd_m": sigmas[k], "caliper_diameters_m": d1.tolist(),
             "caliper_scales": (d1 / d0).tolist(), "diameter_scale_mean": float(d1.mean() / d0.mean()),
         }
-        draws.append(Draw(i, drawn, push, config.replace(modulus_pa=E), record))
+        cfg = config.replace(modulus_pa=E)
+        if any(e.between for e in config.effects):
+            fx_rng = np.random.default_rng([int(seed), i, 1])
+            specs = tuple(e.drawn(fx_rng) for e in config.effects)
+            record["effects_drawn"] = {e.name: dict(e.params) for e, old in zip(specs, config.effects) if old.between}
+            cfg = cfg.replace(effects=specs)
+        draws.append(Draw(i, drawn, push, cfg, record))
     return draws

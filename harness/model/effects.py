@@ -286,6 +286,23 @@ def _pairs(d: Mapping[str, Any]) -> _Pairs:
     return tuple(sorted((str(k), float(v)) for k, v in d.items()))
 
 
+def _between(obj: Any, source: str) -> tuple[tuple[str, tuple[float, float]], ...]:
+    """A model file's ``between_canes`` ({parameter: {median, ln_sd}}) as :attr:`EffectSpec.between`."""
+    if not obj:
+        return ()
+    if not isinstance(obj, Mapping):
+        raise InputError(source, "between_canes", f"expected a mapping of parameter: {{median, ln_sd}}, got {obj!r}")
+    out = []
+    for k, v in obj.items():
+        if not isinstance(v, Mapping) or set(v) != {"median", "ln_sd"}:
+            raise InputError(source, str(k), f"expected {{median: ..., ln_sd: ...}}, got {v!r}")
+        try:
+            out.append((str(k), (float(v["median"]), float(v["ln_sd"]))))
+        except (TypeError, ValueError):
+            raise InputError(source, str(k), f"median and ln_sd must be numbers, got {dict(v)!r}") from None
+    return tuple(sorted(out))
+
+
 @dataclass(frozen=True)
 class EffectSpec:
     """An effect as a model configuration holds it (hashable, serializable).
@@ -299,12 +316,17 @@ class EffectSpec:
         Values that hold for one cane (cane id) or one trial (trial id) only.
     scope : str
         ``global``, ``per_cane`` or ``per_trial`` (what was fitted).
+    between : tuple of (name, (median, ln_sd))
+        How a parameter varies between canes, where that was fitted (discovery's per-cane test):
+        log-normal, median ``median``, sd of its logarithm ``ln_sd``. A cane outside the data is
+        drawn from it by a population export; a trial's model uses ``params`` and ``local`` only.
     """
 
     name: str
     params: _Pairs = ()
     local: tuple[tuple[str, _Pairs], ...] = ()
     scope: str = "global"
+    between: tuple[tuple[str, tuple[float, float]], ...] = ()
 
     @classmethod
     def parse(cls, obj: Any, source: str = "effects") -> "EffectSpec":
@@ -317,9 +339,11 @@ class EffectSpec:
                 raise InputError(source, "effect", f"an effect entry needs a name, got {dict(obj)!r}")
             try:
                 local = tuple(sorted((str(k), _pairs(v)) for k, v in (obj.get("local") or {}).items()))
-                return cls(name, _pairs(obj.get("params") or {}), local, str(obj.get("scope", "global")))
+                params = _pairs(obj.get("params") or {})
             except (TypeError, ValueError, AttributeError) as exc:
                 raise InputError(source, name, f"parameter values must be numbers: {exc}") from None
+            return cls(name, params, local, str(obj.get("scope", "global")),
+                       _between(obj.get("between_canes"), f"{source}: {name}.between_canes"))
         text = str(obj).strip()
         m = re.fullmatch(r"([A-Za-z_][\w.-]*)\s*(?:\((.*)\))?", text)
         if not m:
@@ -345,7 +369,8 @@ class EffectSpec:
         return out
 
     def localized(self, cane_id: str, trial_id: str) -> "EffectSpec":
-        """The same effect with only the values for this trial (for job keys: other canes' values are irrelevant)."""
+        """The same effect with only the values for this trial (for job keys: other canes' values, and how
+        the values vary between canes, are irrelevant)."""
         return EffectSpec(self.name, _pairs(self.values_for(cane_id, trial_id)), (), self.scope)
 
     def instance(self, cane_id: str | None = None, trial_id: str | None = None) -> Effect:
@@ -376,12 +401,32 @@ class EffectSpec:
                 ok = math.isfinite(v) or v == par.null
                 if not ok or (par.log and v <= 0) or v < par.minimum:
                     raise InputError(source, f"{self.name}{where}.{k}", f"invalid value {v!r} ({par.unit})")
+        for k, (median, ln_sd) in self.between:
+            where = f"{self.name}.between_canes.{k}"
+            if k not in cls.parameters:
+                raise InputError(source, where, f"unknown parameter; {self.name} has {', '.join(cls.parameters)}")
+            if not (math.isfinite(median) and median > 0):
+                raise InputError(source, f"{where}.median", f"must be a finite number > 0, got {median!r}")
+            if not (math.isfinite(ln_sd) and ln_sd >= 0):
+                raise InputError(source, f"{where}.ln_sd", f"must be a finite number >= 0, got {ln_sd!r}")
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"effect": self.name, "scope": self.scope, "params": dict(self.params)}
         if self.local:
             d["local"] = {k: dict(v) for k, v in self.local}
+        if self.between:
+            d["between_canes"] = {k: {"median": m, "ln_sd": sd} for k, (m, sd) in self.between}
         return d
+
+    def drawn(self, rng: np.random.Generator) -> "EffectSpec":
+        """A cane outside the data: each parameter in ``between`` drawn from its log-normal (one standard
+        normal each, in the order of ``between``), the others at their global values, no cane's own."""
+        if not self.between:
+            return self
+        values = dict(self.params)
+        for k, (median, ln_sd) in self.between:
+            values[k] = float(median * math.exp(ln_sd * rng.standard_normal()))
+        return EffectSpec(self.name, _pairs(values))
 
     def __str__(self) -> str:
         inner = ", ".join(f"{k}={v:.6g}" for k, v in self.params)

@@ -12,6 +12,8 @@ Written by the discovery workflow (``canebench discover``), read by
         params: {k_root: 120.0}
         ci95: {k_root: [95.0, 150.0]} # informative; not used by the model
         local: {b1c1: {k_root: 80.0}} # values for one cane (or one trial: b1c1t2)
+        between_canes: {k_root: {median: 110.0, ln_sd: 0.5}}  # how it varies between canes
+                                      # (a per-cane fit's); a population export draws from it
     provenance: {...}                 # what produced it (informative)
 
 YAML or JSON (JSON is YAML). Every field is validated with the file's name.
@@ -79,7 +81,8 @@ def load_model_file(path: str | Path) -> ModelConfig:
     for i, e in enumerate(effects):
         if not isinstance(e, dict):
             raise InputError(src, f"effects[{i}]", "expected a mapping with 'effect' and 'params'")
-        spec = EffectSpec.parse({k: v for k, v in e.items() if k in ("effect", "name", "params", "local", "scope")},
+        spec = EffectSpec.parse({k: v for k, v in e.items()
+                                 if k in ("effect", "name", "params", "local", "scope", "between_canes")},
                                 f"{src}: effects[{i}]")
         spec.validate(f"{src}: effects[{i}]")
         specs.append(spec)
