@@ -1180,8 +1180,11 @@ def test_the_selftest_scores_a_per_cane_root_against_the_canes_drawn_roots():
     truth = {"canes": {c: {"k_root": v} for c, v in drawn.items()} | {"b3c1": {}}}
     local = {c: {"k_root": 1.5 * v} for c, v in drawn.items()}  # right ranks, 1.5 times too stiff
     local["b1c2"]["k_root"] = 20.0 * 1.5 * 2.0  # one cane off by a further factor 2
-    entry = {"scope": "per_cane", "params": {"k_root": 33.0}, "per_cane_test": {"p": 1e-4}, "local": local}
+    entry = {"scope": "per_cane", "params": {"k_root": 33.0}, "per_cane_test": {"p": 1e-4, "ln_sd_between_canes": 0.8},
+             "local": local}
     sc = _per_cane_scores(entry, truth)
+    # the drawn roots 10, 20, 40, 80: ln sd = ln 2 times the sd of 0, 1, 2, 3 (sqrt(5/3))
+    assert sc["per_cane_ln_sd_ratio"] == pytest.approx(0.8 / (math.log(2) * math.sqrt(5 / 3)), abs=1e-12)
     a = np.log([1.5 * v for v in drawn.values()]); a[1] += np.log(2.0)
     b = np.log(list(drawn.values()))
     assert sc["per_cane_found"] and sc["per_cane_p"] == 1e-4 and sc["per_cane_n"] == 4
@@ -1190,6 +1193,7 @@ def test_the_selftest_scores_a_per_cane_root_against_the_canes_drawn_roots():
     assert sc["per_cane_err_k_root"] == pytest.approx(33.0 / (10 * 20 * 40 * 80) ** 0.25 - 1.0, abs=1e-12)
     glob = _per_cane_scores({"scope": "global", "params": {"k_root": 28.3}, "per_cane_test": {"p": 0.3}}, truth)
     assert not glob["per_cane_found"] and "per_cane_r" not in glob and glob["per_cane_p"] == 0.3
+    assert "per_cane_ln_sd_ratio" not in glob  # kept global: no spread to compare
     assert _per_cane_scores(None, truth) == {"per_cane_found": False}
     flat = {**entry, "local": {c: {"k_root": 30.0} for c in drawn}}  # one value for all: no correlation
     assert math.isnan(_per_cane_scores(flat, truth)["per_cane_r"])
@@ -1209,6 +1213,10 @@ def test_the_selftest_scores_a_per_cane_root_against_the_canes_drawn_roots():
     assert (s["per_cane_scopes"], s["per_cane_scopes_not_flare"]) == (2, 1)  # the single root's scope only
     assert (s["n_per_cane_sets"], s["per_cane_sets_named_root"], s["per_cane_sets_found_per_cane"]) == (2, "1/2", "1/2")
     assert s["per_cane_r_median"] == s["per_cane_r_worst"] == pytest.approx(sc["per_cane_r"])
+    assert s["per_cane_ln_sd_ratio_median"] == s["per_cane_ln_sd_ratio_worst"] == pytest.approx(sc["per_cane_ln_sd_ratio"])
+    two = pd.concat([rows.iloc[:1], rows.iloc[:1].assign(per_cane_ln_sd_ratio=0.5)])
+    # worst: the ratio farthest from 1 in ln (0.5 against about 0.89)
+    assert summarize(two)["per_cane_ln_sd_ratio_worst"] == 0.5
     assert s["per_cane_median_gap_shrink_out_of_sample"] == pytest.approx(0.8)  # the correctly named set only
     assert s["correct_rate_all_hidden"] == 1.0  # the rates leave the per-cane sets out
     assert summarize(rows[rows.kind == "single"])["n_per_cane_sets"] == 0

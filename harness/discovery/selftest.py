@@ -266,12 +266,18 @@ def _per_cane_scores(entry: dict[str, Any] | None, truth: dict[str, Any]) -> dic
     ``per_cane_r`` and ``per_cane_rms_ln``: the canes' values (``local``) against the drawn ones, in ln,
     over the canes that have both. ``per_cane_err_k_root``: the global fit's value (what a cane not in
     the data takes) against the drawn roots' geometric mean, the value the canes hold between them.
+    ``per_cane_ln_sd_ratio``: the test's spread between canes (the ln sd a population export draws
+    new canes' roots with) over the drawn roots' own (sample sd of their ln).
     """
     drawn = {c: v["k_root"] for c, v in truth["canes"].items() if "k_root" in v}
     out: dict[str, Any] = {"per_cane_found": bool(entry and entry.get("scope") == "per_cane")}
     if not entry:
         return out
-    out["per_cane_p"] = (entry.get("per_cane_test") or {}).get("p", math.nan)
+    test = entry.get("per_cane_test") or {}
+    out["per_cane_p"] = test.get("p", math.nan)
+    if len(drawn) >= 2 and out["per_cane_found"] and "ln_sd_between_canes" in test:
+        sd = float(np.std(np.log(list(drawn.values())), ddof=1))
+        out["per_cane_ln_sd_ratio"] = test["ln_sd_between_canes"] / sd if sd > 0 else math.nan
     if drawn:
         out["per_cane_err_k_root"] = abs(entry["params"]["k_root"] / math.exp(np.mean(np.log(list(drawn.values()))))
                                          - 1.0)
@@ -380,6 +386,10 @@ def _per_cane_summary(df: pd.DataFrame) -> dict[str, Any]:
         v = df[c].dropna() if c in df else pd.Series(dtype=float)
         s[f"{c}_median"] = float(v.median()) if len(v) else math.nan
         s[f"{c}_worst"] = (float(v.min()) if c == "per_cane_r" else float(v.max())) if len(v) else math.nan
+    # the fitted spread between canes against the drawn one: a ratio, worst the farthest from 1 in ln
+    v = df["per_cane_ln_sd_ratio"].dropna() if "per_cane_ln_sd_ratio" in df else pd.Series(dtype=float)
+    s["per_cane_ln_sd_ratio_median"] = float(v.median()) if len(v) else math.nan
+    s["per_cane_ln_sd_ratio_worst"] = float(v.iloc[int(np.argmax(np.abs(np.log(v.to_numpy()))))]) if len(v) else math.nan
     shrink = 1 - df.gap_after_cv / df.gap_before
     s["per_cane_median_gap_shrink_out_of_sample"] = float(shrink[df.correct.astype(bool)].median()) \
         if df.correct.any() else math.nan
