@@ -1,7 +1,7 @@
 """Compare two ``canebench discover --out`` folders of the same datasets, e.g. before and after a
 change that must not alter behaviour.
 
-Run: ``python tests/scripts/compare_discoveries.py BEFORE AFTER NAME [NAME ...]``, where
+Run: ``python tests/scripts/compare_discoveries.py [--tol T] BEFORE AFTER NAME [NAME ...]``, where
 ``BEFORE/NAME`` and ``AFTER/NAME`` are ``--out`` folders, or case folders of two self-test runs
 (``canebench discover --selftest --out``). Per name it says whether
 ``discovery.json`` (without ``timing_s`` and ``provenance``) is identical, and otherwise which
@@ -38,21 +38,24 @@ def discovery_files(root):
                       + glob.glob(os.path.join(root, "discovery.json"))))
 
 
-def json_diff(a, b, path=""):
+def json_diff(a, b, path="", tol=0.0):
     """Walk two JSON values together, yielding ``("changed" | "before" | "after", path)``: a value
-    that differs, or a key present only before or only after."""
+    that differs (two numbers by more than ``tol`` times the larger of 1 and their sizes: absolute
+    below 1, relative above), or a key present only before or only after."""
     if isinstance(a, dict) and isinstance(b, dict):
         for k in a.keys() | b.keys():
             p = f"{path}.{k}" if path else str(k)
             if k in a and k in b:
-                yield from json_diff(a[k], b[k], p)
+                yield from json_diff(a[k], b[k], p, tol)
             else:
                 yield ("before" if k in a else "after"), p
     elif isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
         for i, (x, y) in enumerate(zip(a, b)):
-            yield from json_diff(x, y, f"{path}[{i}]")
+            yield from json_diff(x, y, f"{path}[{i}]", tol)
     elif a != b and not (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)):
-        yield "changed", path or "(top)"
+        numbers = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (a, b))
+        if not (numbers and abs(a - b) <= tol * max(1.0, abs(a), abs(b))):
+            yield "changed", path or "(top)"
 
 
 def csv_diff(pb, pa):
@@ -71,10 +74,14 @@ def _short(paths, n=6):
 
 
 if __name__ == "__main__":
-    before, after = Path(sys.argv[1]), Path(sys.argv[2])
-    for name in sys.argv[3:]:
+    args = sys.argv[1:]
+    tol = 0.0
+    if args and args[0] == "--tol":  # numbers this close (absolute below 1, relative above) count as equal
+        tol, args = float(args[1]), args[2:]
+    before, after = Path(args[0]), Path(args[1])
+    for name in args[2:]:
         docs = [load_doc(root / name / "discovery.json") for root in (before, after)]
-        found = list(json_diff(*docs))
+        found = list(json_diff(*docs, tol=tol))
         changed, only_b, only_a = ([p for k, p in found if k == kind] for kind in ("changed", "before", "after"))
         text = "json identical" if not changed else f"json DIFFERS at {_short(changed)}"
         if only_b or only_a:
