@@ -25,6 +25,7 @@ def test_run_writes_results_report_and_provenance(tmp_path: Path):
     assert meta["engines"]["mujoco"] and meta["engines"]["pinocchio"]
     assert meta["protocol"]["name"] == "fast" and meta["model_config"]["segments"] == 6
     assert meta["synthetic"] is True
+    assert meta["git_dirty"] in (True, False, None)  # uncommitted code says so beside its commit
     assert "mujoco" in meta["backend_settings"] and meta["backend_settings"]["mujoco"]["integrator"] == "discrete"
     for f in ("report.html", "stiffness.png", "log_ratio.png", "traces.png", "traces.csv", "field.csv"):
         assert (out / f).exists(), f
@@ -33,6 +34,24 @@ def test_run_writes_results_report_and_provenance(tmp_path: Path):
     # report rebuilds from the files alone
     (out / "stiffness.png").unlink()
     assert main(["report", str(out)]) == 0 and (out / "stiffness.png").exists()
+
+
+def test_provenance_says_when_a_checkout_has_uncommitted_changes(tmp_path: Path):
+    import subprocess
+
+    from canebench.execute.provenance import git_dirty
+
+    assert git_dirty(tmp_path) is None  # not a checkout
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@example.org"]
+    subprocess.run([*git, "init", "-q"], cwd=tmp_path, check=True)
+    (tmp_path / "a.py").write_text("x = 1\n")
+    subprocess.run([*git, "add", "a.py"], cwd=tmp_path, check=True)
+    subprocess.run([*git, "commit", "-q", "-m", "a"], cwd=tmp_path, check=True)
+    assert git_dirty(tmp_path) is False
+    (tmp_path / "new.txt").write_text("untracked files are not the code that ran\n")
+    assert git_dirty(tmp_path) is False
+    (tmp_path / "a.py").write_text("x = 2\n")
+    assert git_dirty(tmp_path) is True
 
 
 def test_bad_inputs_exit_2_with_message(tmp_path: Path, capsys):

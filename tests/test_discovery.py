@@ -447,7 +447,17 @@ def test_the_screen_s_per_trial_sums_are_its_pass_over_every_point(bundled_trial
     slow = AppliedEffects([s.instance() for s in rest + [EffectSpec.parse("base_flare(excess_mm=0)")]])
     assert slow.changes_diameter and not fast.changes_diameter
     for scr in (ss, ss.take(np.array([4, 4, 1])), ss.with_diameters(ss.d0 * 1.2)):
-        np.testing.assert_allclose(scr.compliance(fast)[0], scr.compliance(slow)[0], rtol=1e-12, atol=0)
+        # the same arithmetic on both paths: equal to the last bit
+        np.testing.assert_array_equal(scr.compliance(fast)[0], scr.compliance(slow)[0])
+        # and the pass over every point the sums replace, written out: sum of w u^T K u / (E I) per trial
+        E = fast.modulus(scr.E)
+        th = scr.th0 + np.deg2rad(23.0)
+        c, s = np.cos(th)[scr.idx], np.sin(th)[scr.idx]
+        kern = scr.kaa * c**2 + scr.kae * c * s + scr.kee * s**2
+        cane = np.bincount(scr.idx, scr.w * kern / (np.pi * np.maximum(scr.d0, scr.min_d) ** 4 / 64.0),
+                           minlength=len(scr.trials)) / E
+        root = (scr.raa * np.cos(th) ** 2 + scr.rae * np.cos(th) * np.sin(th) + scr.ree * np.sin(th) ** 2) / 35.0
+        np.testing.assert_allclose(scr.compliance(fast)[0], cane + root, rtol=1e-13, atol=0)
     # points not laid out a run per trial (summed by bincount instead) give the same sums
     from dataclasses import replace
 

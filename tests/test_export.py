@@ -435,7 +435,6 @@ def test_a_population_draws_a_per_cane_effect_from_its_spread_between_canes(tmp_
     res = export_population(sel, cfg, tmp_path / "pop", 6, seed=9, formats="mjcf")
     man = res.manifest
     np.testing.assert_allclose(man["root_compliance.k_root"], k[:6])
-    assert "between_canes" in res.header["what_is_drawn"]
     from canebench.export.bundle import _k_linear
     from canebench.model.effects import EffectSpec
 
@@ -464,11 +463,52 @@ def test_between_canes_in_a_model_file_is_checked_and_survives_a_round_trip(tmp_
                        ("{k_rot: {median: 20, ln_sd: 0.5}}", "between_canes.k_rot"),
                        ("{k_root: {median: 20}}", "k_root"),
                        ("{k_root: {median: twenty, ln_sd: 0.5}}", "k_root"),
+                       ("{k_root: {median: true, ln_sd: 0.5}}", "k_root"),
+                       ("0", "between_canes"),
                        ("[20, 0.5]", "between_canes")):
         path.write_text(PER_CANE_MODEL.replace("{k_root: {median: 25.0, ln_sd: 0.6}}", bad))
         with pytest.raises(InputError) as exc:
             load_model_file(path)
         assert str(path) in str(exc.value) and field in str(exc.value), (bad, str(exc.value))
+    # only an effect that may be each cane's own, and only its parameter that switches it off: a log-normal
+    # draw of a rig or a (signed) pitch, or of a collar's length, is not what discovery fits
+    for effect, params, par in (("rig_compliance", "{k_rig: 300.0}", "k_rig"),
+                                ("probe_misalignment", "{angle_deg: -10.0}", "angle_deg"),
+                                ("base_flare", "{excess_mm: 3.0, length_mm: 120.0}", "length_mm")):
+        path.write_text(f"canebench_model: 1\neffects:\n  - effect: {effect}\n    params: {params}\n"
+                        f"    between_canes: {{{par}: {{median: 20, ln_sd: 0.5}}}}\n")
+        with pytest.raises(InputError, match=f"{effect}.between_canes.{par}.*cannot vary between canes"):
+            load_model_file(path)
+    # a spread without canes' own values (a hand-written file) also stays out of a trial's model
+    path.write_text(PER_CANE_MODEL.replace("    local: {b1c1: {k_root: 5.0}, b2c1: {k_root: 200.0}}\n", ""))
+    spread_only = load_model_file(path)
+    assert spread_only.effects[0].between and not spread_only.effects[0].local
+    assert spread_only.localized("b1c1", "b1c1t1") == spread_only.replace(
+        effects=tuple(dataclasses.replace(e, between=()) for e in spread_only.effects))
+
+
+def test_a_population_draws_only_the_parameter_that_varies_and_warns_where_no_spread_was_written(data):
+    """A collar per cane draws its excess; its length stays the fitted one and is not reported as
+    drawn. A model with canes' own values but no spread (a file from before between_canes) gives
+    each member its source cane's value, and says so."""
+    from canebench.errors import InputWarning
+    from canebench.export.bundle import select
+    from canebench.export.population import draw_population
+    from canebench.model.effects import EffectSpec
+
+    sel = select(data, by_trial=False)[:2]
+    collar = EffectSpec("base_flare", (("excess_mm", 3.0), ("length_mm", 120.0)), (), "per_cane",
+                        (("excess_mm", (3.0, 0.5)),))
+    draws = draw_population(sel, ModelConfig(effects=(collar,)), 3, seed=2)
+    for d in draws:
+        (spec,) = d.config.effects
+        assert list(d.record["effects_drawn"]) == ["base_flare"]
+        assert d.record["effects_drawn"]["base_flare"] == {"excess_mm": dict(spec.params)["excess_mm"]}
+        assert dict(spec.params)["length_mm"] == 120.0
+    own = EffectSpec("root_compliance", (("k_root", 30.0),), ((sel[0][0].id, (("k_root", 5.0),)),), "per_cane")
+    with pytest.warns(InputWarning, match="no spread between canes"):
+        d0 = draw_population(sel, ModelConfig(effects=(own,)), 1, seed=2)[0]
+    assert d0.config.applied_effects(sel[0][0].id, None).root_compliance() == pytest.approx(1 / 5.0)
 
 
 # ------------------------------------------------------------------ bad input

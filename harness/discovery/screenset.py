@@ -238,6 +238,8 @@ class ScreenSet:
         """(3, n): each trial's sums over its quadrature points of w k_aa / I, w k_ae / I and w k_ee / I
         at the diameters ``d`` (one per point; I = pi d^4 / 64)."""
         n = len(self.trials)
+        if n == 0:
+            return np.zeros((3, 0))
         if self._weights is None:
             W = np.stack([self.w * self.kaa, self.w * self.kae, self.w * self.kee]) * (64.0 / np.pi)
             counts = np.bincount(self.idx, minlength=n)

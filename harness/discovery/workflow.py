@@ -583,7 +583,8 @@ def per_cane_note(per_cane: Mapping[str, PerCaneTest]) -> str:
         f"{t.effect}: {t.reason}; each cane's {t.parameter} ({min(t.values.values()):.4g} to "
         f"{max(t.values.values()):.4g} {t.unit}; their median {t.median:.4g}) is in model.yaml (local); a cane "
         f"not in the data takes the global fit's value, the one the engines confirm and the interval and the "
-        f"gap out of sample are of; a population export (canebench export --model model.yaml --population N) "
+        f"gap out of sample are of; a population export (canebench export --field DIR --model model.yaml "
+        f"--population N) "
         f"draws each new cane's {t.parameter} from median {t.median:.4g} and ln sd {t.ln_sd:.2f} (between_canes)"
         for t in per_cane.values())
 
@@ -684,8 +685,8 @@ def write_outputs(res: DiscoveryResult, out: Path, preset: str, ci: dict) -> Non
     doc = res.to_json()
     backends = sorted(set(res.engines.backend) if len(res.engines) else set()) or [BASELINES[res.baseline][0]]
     prov = provenance(backends, PROTOCOLS["fast"], res.config)
-    doc["provenance"] = {k: prov[k] for k in ("canebench", "git_commit", "created", "python", "engines", "protocol",
-                                              "model_config")}
+    doc["provenance"] = {k: prov[k] for k in ("canebench", "git_commit", "git_dirty", "created", "python", "engines",
+                                              "protocol", "model_config")}
     (out / "discovery.json").write_text(json.dumps(doc, indent=2, default=float))
     res.trials.to_csv(out / "discovery.csv", index=False)
     res.steps.to_csv(out / "discovery_steps.csv", index=False)
@@ -700,7 +701,7 @@ def write_outputs(res: DiscoveryResult, out: Path, preset: str, ci: dict) -> Non
         if n["ci95"]:
             ci95[n["effect"]] = n["ci95"]
     made = {"produced_by": "canebench discover", "baseline": res.baseline,
-            **{k: doc["provenance"][k] for k in ("canebench", "git_commit", "created", "engines")}}
+            **{k: doc["provenance"][k] for k in ("canebench", "git_commit", "git_dirty", "created", "engines")}}
     write_model_file(out / "model.yaml", res.model_file_config(), preset, ci95, made)
     if res.partial_config is not None:
         write_model_file(out / "model_partial.yaml", res.partial_config, preset,

@@ -26,6 +26,17 @@ def git_commit() -> str | None:
         return None
 
 
+def git_dirty(where: str | Path | None = None) -> bool | None:
+    """Whether the tracked files of canebench's checkout (or of the one holding ``where``) differ from
+    the commit :func:`git_commit` names: a result made by uncommitted code. None outside a checkout."""
+    try:
+        r = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True,
+                           cwd=Path(where) if where is not None else Path(__file__).parent, timeout=10)
+        return bool(r.stdout.strip()) if r.returncode == 0 else None
+    except Exception:
+        return None
+
+
 def provenance(backends: list[str], proto: Protocol, config: ModelConfig | None,
                extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """The provenance block of ``run.json`` (and of every study's metadata)."""
@@ -33,6 +44,7 @@ def provenance(backends: list[str], proto: Protocol, config: ModelConfig | None,
     return {
         "canebench": __version__,
         "git_commit": git_commit(),
+        "git_dirty": git_dirty(),
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "python": sys.version.split()[0],
         "platform": platform.platform(),

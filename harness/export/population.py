@@ -111,6 +111,14 @@ def draw_population(selection: list[tuple[CaneDescription, str]], config: ModelC
     if not (np.isfinite(caliper_sd_m) and caliper_sd_m >= 0):
         raise InputError("--caliper-sd-mm", "caliper_sd", f"must be a finite number >= 0, got {caliper_sd_m!r}")
     dist = get_distribution(distribution)
+    for e in config.effects:
+        if e.local and not e.between:
+            # a model file written before between_canes (or by hand): no spread to draw a new cane from
+            from ..errors import warn_input
+
+            warn_input("--model", f"{e.name}.local", "per-cane values but no spread between canes "
+                       "(between_canes): each member takes its source cane's own value, not a new cane's; "
+                       "rerun canebench discover to write the spread")
     sigmas = [max(caliper_sd_m, fit_residual_sd(c, config)) for c, _ in selection]
     draws = []
     for i in range(n):
@@ -130,7 +138,8 @@ def draw_population(selection: list[tuple[CaneDescription, str]], config: ModelC
         if any(e.between for e in config.effects):
             fx_rng = np.random.default_rng([int(seed), i, 1])
             specs = tuple(e.drawn(fx_rng) for e in config.effects)
-            record["effects_drawn"] = {e.name: dict(e.params) for e, old in zip(specs, config.effects) if old.between}
+            record["effects_drawn"] = {e.name: {k: dict(e.params)[k] for k, _ in old.between}
+                                       for e, old in zip(specs, config.effects) if old.between}
             cfg = cfg.replace(effects=specs)
         draws.append(Draw(i, drawn, push, cfg, record))
     return draws

@@ -211,7 +211,7 @@ class ModelConfig:
         """This configuration as one trial sees it: per-cane and per-trial effect
         values resolved, every other cane's dropped (so a job's key depends
         only on what acts on its trial)."""
-        if not any(e.local for e in self.effects):
+        if not any(e.local or e.between for e in self.effects):
             return self
         return dataclasses.replace(self, effects=tuple(e.localized(cane_id, trial_id) for e in self.effects))
 

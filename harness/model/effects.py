@@ -287,8 +287,9 @@ def _pairs(d: Mapping[str, Any]) -> _Pairs:
 
 
 def _between(obj: Any, source: str) -> tuple[tuple[str, tuple[float, float]], ...]:
-    """A model file's ``between_canes`` ({parameter: {median, ln_sd}}) as :attr:`EffectSpec.between`."""
-    if not obj:
+    """A model file's ``between_canes`` ({parameter: {median, ln_sd}}) as :attr:`EffectSpec.between`
+    (absent: None or an empty mapping)."""
+    if obj is None:
         return ()
     if not isinstance(obj, Mapping):
         raise InputError(source, "between_canes", f"expected a mapping of parameter: {{median, ln_sd}}, got {obj!r}")
@@ -296,6 +297,8 @@ def _between(obj: Any, source: str) -> tuple[tuple[str, tuple[float, float]], ..
     for k, v in obj.items():
         if not isinstance(v, Mapping) or set(v) != {"median", "ln_sd"}:
             raise InputError(source, str(k), f"expected {{median: ..., ln_sd: ...}}, got {v!r}")
+        if any(isinstance(x, (bool, str)) or x is None for x in v.values()):
+            raise InputError(source, str(k), f"median and ln_sd must be numbers, got {dict(v)!r}")
         try:
             out.append((str(k), (float(v["median"]), float(v["ln_sd"]))))
         except (TypeError, ValueError):
@@ -405,6 +408,13 @@ class EffectSpec:
             where = f"{self.name}.between_canes.{k}"
             if k not in cls.parameters:
                 raise InputError(source, where, f"unknown parameter; {self.name} has {', '.join(cls.parameters)}")
+            # a log-normal spread is what discovery fits for a cane's own positive value: an effect that
+            # may be each cane's own, and its parameter that switches it off (a rig or a pitch has none)
+            varies = next((p for p, par in cls.parameters.items() if par.switches_off), None)
+            if "per_cane" not in cls.scopes or k != varies:
+                raise InputError(source, where, f"{self.name}.{k} cannot vary between canes"
+                                 + (f" (only {varies} can)" if "per_cane" in cls.scopes and varies else
+                                    f" ({self.name} is one value for all canes)"))
             if not (math.isfinite(median) and median > 0):
                 raise InputError(source, f"{where}.median", f"must be a finite number > 0, got {median!r}")
             if not (math.isfinite(ln_sd) and ln_sd >= 0):

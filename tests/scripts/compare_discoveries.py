@@ -92,7 +92,7 @@ if __name__ == "__main__":
             if pb.exists() or pa.exists():
                 verdict, extra = csv_diff(pb, pa)
                 verdicts.append(f"{f} {verdict}" + (f" [{' '.join(extra)}]" if extra else ""))
-        stamp = ("created", "git_commit", "canebench:")
+        stamp = ("created", "git_commit", "git_dirty", "canebench:")
         paths = [root / name / "model.yaml" for root in (before, after)]
         if all(p.exists() for p in paths):
             models = [[ln for ln in p.read_text().splitlines() if not any(k in ln for k in stamp)] for p in paths]
