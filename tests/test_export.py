@@ -509,6 +509,13 @@ def test_a_population_draws_only_the_parameter_that_varies_and_warns_where_no_sp
     with pytest.warns(InputWarning, match="no spread between canes"):
         d0 = draw_population(sel, ModelConfig(effects=(own,)), 1, seed=2)[0]
     assert d0.config.applied_effects(sel[0][0].id, None).root_compliance() == pytest.approx(1 / 5.0)
+    # a per-trial effect's values (an obstruction's onsets) are not a cane's: no warning
+    onsets = EffectSpec("obstruction", (), (("b1c1t2", (("onset_mm", 30.0),)),), "per_trial")
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InputWarning)
+        draw_population(sel, ModelConfig(effects=(onsets,)), 1, seed=2)
 
 
 # ------------------------------------------------------------------ bad input

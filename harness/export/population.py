@@ -112,8 +112,9 @@ def draw_population(selection: list[tuple[CaneDescription, str]], config: ModelC
         raise InputError("--caliper-sd-mm", "caliper_sd", f"must be a finite number >= 0, got {caliper_sd_m!r}")
     dist = get_distribution(distribution)
     for e in config.effects:
-        if e.local and not e.between:
+        if e.scope == "per_cane" and e.local and not e.between:
             # a model file written before between_canes (or by hand): no spread to draw a new cane from
+            # (a per-trial effect's values, an obstruction's onsets, are its trials' and draw nothing)
             from ..errors import warn_input
 
             warn_input("--model", f"{e.name}.local", "per-cane values but no spread between canes "
