@@ -131,13 +131,10 @@ class PerCaneTest:
 
 
 def varying_parameter(name: str) -> str | None:
-    """The parameter of effect ``name`` that may vary per cane: its first one that switches the effect
-    off, where the effect allows the ``per_cane`` scope and is not the cane's level itself (a modulus
-    scale per cane is the random level every fit already has); None otherwise."""
-    cls = EFFECTS[name]
-    if "per_cane" not in cls.scopes or name == "modulus_scale":
-        return None
-    return next((p for p, par in cls.parameters.items() if par.switches_off), None)
+    """The parameter of effect ``name`` that discovery tests per cane: its
+    :meth:`~canebench.model.effects.Effect.per_cane_parameter`, unless the effect is the cane's level
+    itself (a modulus scale per cane is the random level every fit already has); None otherwise."""
+    return None if name == "modulus_scale" else EFFECTS[name].per_cane_parameter()
 
 
 class _Hierarchy:

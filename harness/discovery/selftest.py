@@ -275,12 +275,12 @@ def _per_cane_scores(entry: dict[str, Any] | None, truth: dict[str, Any]) -> dic
         return out
     test = entry.get("per_cane_test") or {}
     out["per_cane_p"] = test.get("p", math.nan)
+    ln_drawn = np.log(list(drawn.values()))
     if len(drawn) >= 2 and out["per_cane_found"] and "ln_sd_between_canes" in test:
-        sd = float(np.std(np.log(list(drawn.values())), ddof=1))
+        sd = float(np.std(ln_drawn, ddof=1))
         out["per_cane_ln_sd_ratio"] = test["ln_sd_between_canes"] / sd if sd > 0 else math.nan
     if drawn:
-        out["per_cane_err_k_root"] = abs(entry["params"]["k_root"] / math.exp(np.mean(np.log(list(drawn.values()))))
-                                         - 1.0)
+        out["per_cane_err_k_root"] = abs(entry["params"]["k_root"] / math.exp(np.mean(ln_drawn)) - 1.0)
     local = {c: v["k_root"] for c, v in (entry.get("local") or {}).items() if c in drawn}
     if len(local) >= 3:
         a = np.log([local[c] for c in local])
@@ -382,14 +382,13 @@ def _per_cane_summary(df: pd.DataFrame) -> dict[str, Any]:
     s: dict[str, Any] = {"n_per_cane_sets": int(len(df)),
                          "per_cane_sets_named_root": f"{int(df.correct.sum())}/{len(df)}",
                          "per_cane_sets_found_per_cane": f"{int(_col(df, 'per_cane_found', False).sum())}/{len(df)}"}
-    for c in ("per_cane_r", "per_cane_rms_ln", "per_cane_err_k_root"):
-        v = df[c].dropna() if c in df else pd.Series(dtype=float)
-        s[f"{c}_median"] = float(v.median()) if len(v) else math.nan
-        s[f"{c}_worst"] = (float(v.min()) if c == "per_cane_r" else float(v.max())) if len(v) else math.nan
-    # the fitted spread between canes against the drawn one: a ratio, worst the farthest from 1 in ln
-    v = df["per_cane_ln_sd_ratio"].dropna() if "per_cane_ln_sd_ratio" in df else pd.Series(dtype=float)
-    s["per_cane_ln_sd_ratio_median"] = float(v.median()) if len(v) else math.nan
-    s["per_cane_ln_sd_ratio_worst"] = float(v.iloc[int(np.argmax(np.abs(np.log(v.to_numpy()))))]) if len(v) else math.nan
+    # each score's worst: r the lowest, errors the highest, the spread's ratio the farthest from 1 in ln
+    worst = {"per_cane_r": np.argmin, "per_cane_rms_ln": np.argmax, "per_cane_err_k_root": np.argmax,
+             "per_cane_ln_sd_ratio": lambda v: np.argmax(np.abs(np.log(v)))}
+    for c, pick in worst.items():
+        v = df[c].dropna().to_numpy(float) if c in df else np.zeros(0)
+        s[f"{c}_median"] = float(np.median(v)) if len(v) else math.nan
+        s[f"{c}_worst"] = float(v[int(pick(v))]) if len(v) else math.nan
     shrink = 1 - df.gap_after_cv / df.gap_before
     s["per_cane_median_gap_shrink_out_of_sample"] = float(shrink[df.correct.astype(bool)].median()) \
         if df.correct.any() else math.nan

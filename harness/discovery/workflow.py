@@ -584,8 +584,8 @@ def per_cane_note(per_cane: Mapping[str, PerCaneTest]) -> str:
         f"{max(t.values.values()):.4g} {t.unit}; their median {t.median:.4g}) is in model.yaml (local); a cane "
         f"not in the data takes the global fit's value, the one the engines confirm and the interval and the "
         f"gap out of sample are of; a population export (canebench export --field DIR --model model.yaml "
-        f"--population N) "
-        f"draws each new cane's {t.parameter} from median {t.median:.4g} and ln sd {t.ln_sd:.2f} (between_canes)"
+        f"--population N) draws each new cane's {t.parameter} from median {t.median:.4g} and ln sd "
+        f"{t.ln_sd:.2f} (between_canes)"
         for t in per_cane.values())
 
 

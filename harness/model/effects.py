@@ -109,6 +109,14 @@ class Effect:
     def __repr__(self) -> str:
         return f"{type(self).__name__}({', '.join(f'{k}={v:.4g}' for k, v in self.p.items())})"
 
+    @classmethod
+    def per_cane_parameter(cls) -> str | None:
+        """The parameter that may differ between canes: the first that switches the effect off, where
+        the effect allows the ``per_cane`` scope; None otherwise."""
+        if "per_cane" not in cls.scopes:
+            return None
+        return next((p for p, par in cls.parameters.items() if par.switches_off), None)
+
     # ----------------------------------------------------------- hooks
     def modulus(self, E: float) -> float:
         """Flexural modulus (Pa) the model uses, given the stated one."""
@@ -408,13 +416,12 @@ class EffectSpec:
             where = f"{self.name}.between_canes.{k}"
             if k not in cls.parameters:
                 raise InputError(source, where, f"unknown parameter; {self.name} has {', '.join(cls.parameters)}")
-            # a log-normal spread is what discovery fits for a cane's own positive value: an effect that
-            # may be each cane's own, and its parameter that switches it off (a rig or a pitch has none)
-            varies = next((p for p, par in cls.parameters.items() if par.switches_off), None)
-            if "per_cane" not in cls.scopes or k != varies:
+            # a log-normal spread is what discovery fits for a cane's own positive value (a rig or a
+            # pitch has none)
+            varies = cls.per_cane_parameter()
+            if k != varies:
                 raise InputError(source, where, f"{self.name}.{k} cannot vary between canes"
-                                 + (f" (only {varies} can)" if "per_cane" in cls.scopes and varies else
-                                    f" ({self.name} is one value for all canes)"))
+                                 + (f" (only {varies} can)" if varies else f" ({self.name} is one value for all canes)"))
             if not (math.isfinite(median) and median > 0):
                 raise InputError(source, f"{where}.median", f"must be a finite number > 0, got {median!r}")
             if not (math.isfinite(ln_sd) and ln_sd >= 0):
