@@ -1207,6 +1207,14 @@ def test_the_selftest_scores_a_per_cane_root_against_the_canes_drawn_roots():
     assert _per_cane_scores(None, truth) == {"per_cane_found": False}
     flat = {**entry, "local": {c: {"k_root": 30.0} for c in drawn}}  # one value for all: no correlation
     assert math.isnan(_per_cane_scores(flat, truth)["per_cane_r"])
+    # against the generator's law (median 25, ln sd 0.7), in the test's standard errors (0.2 and 0.25)
+    assert "per_cane_ln_sd_z" not in sc  # no sampling covariance in the entry: no z
+    law = {**truth, "effects": {"root_compliance": {"k_root": 25.0, "ln_sd": 0.7}}}
+    with_cov = {**entry, "per_cane_test": {**entry["per_cane_test"], "median": 30.0,
+                                           "cov_ln_median_ln_sd": [[0.04, 0.01], [0.01, 0.0625]]}}
+    z = _per_cane_scores(with_cov, law)
+    assert z["per_cane_ln_median_z"] == pytest.approx(math.log(30 / 25) / 0.2, abs=1e-12)
+    assert z["per_cane_ln_sd_z"] == pytest.approx(math.log(0.8 / 0.7) / 0.25, abs=1e-12)
 
     base = dict(partial="", size=0.5, gap_before=1.0, unexplained=False)
     rows = pd.DataFrame([
@@ -1353,8 +1361,12 @@ def test_a_close_rival_is_worded_once_for_the_cli_and_the_report(tmp_path):
     line and, escaped, in the report's table; a name without one reads as before."""
     import json
 
-    from canebench.cli.discover import _rivals_text
+    from canebench.cli.discover import _part
+    from canebench.discovery.checks_text import rivals_text
     from reports.discovery import section
+
+    def _rivals_text(n):  # as the CLI's line puts it
+        return _part(rivals_text(n), " ({})")
 
     won = {"effect": "modulus_scale", "scope": "global", "params": {"scale": 1.31}, "ci95": {"scale": [1.2, 1.4]},
            "close_rivals": [{"candidate": "probe_misalignment", "bic_above": 0.186},

@@ -134,6 +134,49 @@ def test_the_quadrature_holds_with_a_calipers_penalty_and_past_the_grids_ends():
     assert h.nll(theta) == pytest.approx(want, rel=1e-9, abs=1e-9)
 
 
+def test_the_spreads_sampling_covariance_matches_its_scatter_over_repeated_datasets():
+    """:func:`sampling_cov` (the inverse observed information, the (mu, ln omega) block) against the
+    scatter of the fitted mu and ln omega over 40 datasets drawn from one hierarchy (18 canes, three
+    pushes, prediction linear in ln v with a root's share larger at the lower push, each cane's level
+    and noise beside it). The sd of 40 estimates is itself uncertain by about 1 / sqrt(2 x 39) = 11 %,
+    and the information's inverse is an asymptotic answer at 18 canes (in development, 60 datasets:
+    0.137 against 0.151 for mu, 0.175 against 0.182 for ln omega), so each ratio of scatter to the
+    median standard error must lie in [0.7, 1.4] (about 3 of the sd's errors); a covariance off by
+    a factor 2 in variance (41 % in sd) fails. The (mu, ln omega) correlation is near 0 both ways.
+    The 95 % Wald intervals cover the truth in at least 32 of 40 (90 % and 93 % in development; ML's
+    ln omega is low by about 0.08 at 18 canes)."""
+    from canebench.discovery import per_cane as pc
+
+    rng = np.random.default_rng(7)
+    C = 18
+    canes = np.repeat([f"c{i:02d}" for i in range(C)], 3)
+    inv = np.unique(canes, return_inverse=True)[1]
+    n = len(canes)
+    b = np.tile([-0.8, -0.55, -0.3], C)
+    a = rng.normal(0.0, 0.3, n)
+    mu, omega, s2, t2 = math.log(50.0), 0.6, 0.05**2, 0.15**2
+    est, se, cover = [], [], 0
+    for _ in range(40):
+        y = (a + b * (mu + omega * rng.normal(size=C))[inv] + rng.normal(0.0, math.sqrt(t2), C)[inv]
+             + rng.normal(0.0, math.sqrt(s2), n))
+        h = _linear_hierarchy(a, b, y, canes, np.zeros((n, n)))
+        base = np.array([mu, -np.inf, math.log(s2), math.log(t2)])
+        x0, _ = pc._fit(h, [base, base + np.array([0.0, 0.0, -1.0, 0.0])], free_omega=False)
+        x1, _ = pc._fit(h, [np.array([x0[0], math.log(o), x0[2], x0[3]]) for o in (0.15, 0.5, 1.2)], free_omega=True)
+        V = np.array(pc.sampling_cov(h, x1))
+        assert V.shape == (2, 2) and np.all(np.linalg.eigvalsh(V) > 0)
+        est.append(x1[:2])
+        se.append(np.sqrt(np.diag(V)))
+        cover += bool(np.all(np.abs(x1[:2] - [mu, math.log(omega)]) < 1.96 * np.sqrt(np.diag(V))))
+    est, se = np.array(est), np.array(se)
+    ratio = est.std(axis=0, ddof=1) / np.median(se, axis=0)
+    assert np.all((ratio > 0.7) & (ratio < 1.4)), ratio
+    assert abs(np.corrcoef(est.T)[0, 1]) < 0.4
+    assert cover >= 32, cover
+    # omega at 0 has no ln omega to give an error of
+    assert pc.sampling_cov(h, np.array([mu, -np.inf, math.log(s2), math.log(t2)])) is None
+
+
 def _simulate(at, rng, k_med, ln_sd):
     """ln k_field on the bundled canes' screen: a root per cane (ln-normal about ``k_med``), each
     cane's own level (modulus, sd 0.15 in ln), trial noise 0.05 and one draw of the caliper lines'
@@ -200,7 +243,7 @@ def test_a_per_cane_value_reaches_each_canes_trials_through_the_model_file(tmp_p
     back = load_model_file(f)
     assert back.effects[0].scope == "per_cane"
     # and the hierarchy's median and spread, what a population export draws a new cane's value from
-    assert back.effects[0].between == (("k_root", (21.0, 0.6)),)
+    assert back.effects[0].between == (("k_root", (21.0, 0.6, None)),)
     for cane, k in (("b1c1", 8.0), ("b1c2", 55.0), ("b9c9", 20.0)):
         (e,) = back.localized(cane, f"{cane}t1").effects
         assert e.instance().root_compliance() == pytest.approx(1.0 / k)
@@ -265,8 +308,22 @@ def test_the_scope_is_worded_for_the_cli_and_the_report():
                              "ln_sd_between_canes": 0.74, "values": {"a": 8.1, "b": 95.0},
                              "spread_mean_abs_ln_k": 0.2}}
     assert scope_text(per) == "per cane: k_root 8.1 to 95 N m/rad over 2 canes (ln sd 0.74; p = 2e-05)"
+    # with the spread's sampling covariance, ln omega's standard error as a relative error of omega
+    per["per_cane_test"]["cov_ln_median_ln_sd"] = [[0.01, 0.0], [0.0, 0.0289]]
+    assert scope_text(per) == "per cane: k_root 8.1 to 95 N m/rad over 2 canes (ln sd 0.74 +- 17 %; p = 2e-05)"
     one = {"per_cane_test": {"per_cane": False, "p": 0.41, "alpha": 0.01, "spread_mean_abs_ln_k": 0.0}}
     assert scope_text(one) == "one value for all canes (per-cane test: p = 0.41)"
+    # and discovery's note names what a population draws from, with the errors where known
+    from canebench.discovery.per_cane import PerCaneTest
+    from canebench.discovery.workflow import per_cane_note
+
+    t = PerCaneTest("root_compliance", "k_root", "N m/rad", 21.0, 0.6, 12.0, 1e-4, 0.01, 0.2, True,
+                    {"b1c1": 8.0, "b1c2": 55.0}, {"b1c1": 0.3, "b1c2": 0.4}, "varies")
+    assert per_cane_note({"root_compliance": t}).endswith("from median 21 and ln sd 0.60 (between_canes)")
+    t.cov_ln = ((0.0049, 0.0), (0.0, 0.0625))
+    assert per_cane_note({"root_compliance": t}).endswith(
+        "(between_canes), each first drawn within its sampling error (standard errors 0.07 in ln median, "
+        "0.25 in ln ln sd)")
 
 
 @pytest.mark.heavy
@@ -299,7 +356,12 @@ def test_discover_gives_each_cane_its_own_root_where_the_generator_hides_one_per
     (e,) = [s for s in cfg.effects if s.name == "root_compliance"]
     assert e.scope == "per_cane" and set(dict(e.local)) == set(c)
     pct = root["per_cane_test"]
-    assert e.between == (("k_root", (pytest.approx(pct["median"]), pytest.approx(pct["ln_sd_between_canes"]))),)
+    assert e.between == (("k_root", (pytest.approx(pct["median"]), pytest.approx(pct["ln_sd_between_canes"]),
+                                      tuple(map(tuple, pct["cov_ln_median_ln_sd"])))),)
+    # with the spread's sampling covariance: a standard error of ln omega near 1 / sqrt(2 (C - 1)), its
+    # value for C canes' exact values (0.17 at 18); noisier pushes make it larger, not under half of it
+    se_ln_sd = math.sqrt(pct["cov_ln_median_ln_sd"][1][1])
+    assert 0.5 / math.sqrt(2 * (len(c) - 1)) < se_ln_sd < 1.0, se_ln_sd
     # beside them the global fit's value, which a cane not in the data takes; the engines ran that
     # global model, and the provenance records it (no canes' values)
     assert dict(e.params)["k_root"] == pytest.approx(root["params"]["k_root"])

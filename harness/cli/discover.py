@@ -68,7 +68,7 @@ def main(a: argparse.Namespace) -> int:
         stem = "selftest_subset" if a.selftest_cases else "selftest"
         print(f"written: {out / (stem + '.csv')}, {out / (stem + '.json')}")
         return 0
-    from ..discovery.checks_text import adequacy_lines, fitted_entry
+    from ..discovery.checks_text import adequacy_lines, change_text, fitted_entry, rivals_text, scope_text
     from ..discovery.verdict import INADEQUATE, UNEXPLAINED_WHY
     from ..discovery.workflow import discover
     from ..execute.progress import Progress
@@ -94,7 +94,8 @@ def main(a: argparse.Namespace) -> int:
                   + (f" and {early} early contact(s), left out of the fit" if early else "") + ": "
                   + ", ".join(f"{t} at {v['onset_mm']:.1f} mm" + _excluded_text(v) for t, v in n["local"].items()))
         else:
-            print(f"  {what}: {n['effect']} {_params_text(n)}{_change_text(n)}{_scope_text(n)}{_rivals_text(n)}")
+            print(f"  {what}: {n['effect']} {_params_text(n)}{_part(change_text(n), '; alone: {}')}"
+                  f"{_part(scope_text(n), '; {}')}{_part(rivals_text(n), ' ({})')}")
     for u in doc.get("unsupported", []):
         print(f"  not named: {u['effect']} {_params_text(u)}"
               + (f" (its interval reaches no effect: {', '.join(u['covers_null'])})" if u["covers_null"] else "")
@@ -127,28 +128,10 @@ def main(a: argparse.Namespace) -> int:
     return 0
 
 
-def _rivals_text(n: dict) -> str:
-    """`` (barely ahead of X: BIC +0.71)`` for a name won by less than CLOSE_BIC, else ``""``."""
-    from ..discovery.checks_text import rivals_text
-
-    r = rivals_text(n)
-    return f" ({r})" if r else ""
-
-
-def _change_text(n: dict) -> str:
-    """``; alone: ln k +0.412 (median; ...)`` for an effect with ``ln_k_change``, else ``""``."""
-    from ..discovery.checks_text import change_text
-
-    c = change_text(n)
-    return f"; alone: {c}" if c else ""
-
-
-def _scope_text(n: dict) -> str:
-    """``; per cane: ...`` or ``; one value for all canes ...`` for a tested effect, else ``""``."""
-    from ..discovery.checks_text import scope_text
-
-    c = scope_text(n)
-    return f"; {c}" if c else ""
+def _part(text: str, fmt: str) -> str:
+    """``fmt`` around ``text`` (``"; alone: {}"``), or ``""`` where there is no text: the named
+    line's optional parts (:mod:`..discovery.checks_text` words each, the report too)."""
+    return fmt.format(text) if text else ""
 
 
 def _params_text(n: dict) -> str:

@@ -10,7 +10,7 @@ fails, say more: what each failed check means.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Mapping
 
 NAN = math.nan
 
@@ -42,7 +42,7 @@ def change_text(named: dict[str, Any]) -> str:
 
 def scope_text(named: dict[str, Any]) -> str:
     """What the per-cane test (:mod:`.per_cane`) found for an effect in ``discovery.json`` that carries
-    ``per_cane_test``: ``per cane: k_root 8.1 to 95 N m/rad over 18 canes (ln sd 0.74; p = 2e-05)``
+    ``per_cane_test``: ``per cane: k_root 8.1 to 95 N m/rad over 18 canes (ln sd 0.74 +- 17 %; p = 2e-05)``
     or ``one value for all canes (per-cane test: p = 0.41)``; ``""`` where it was not tested."""
     t = named.get("per_cane_test")
     if not t:
@@ -50,7 +50,7 @@ def scope_text(named: dict[str, Any]) -> str:
     if t["per_cane"]:
         v = t["values"].values()
         return (f"per cane: {t['parameter']} {min(v):.4g} to {max(v):.4g} {t['unit']} over {len(v)} canes "
-                f"(ln sd {t['ln_sd_between_canes']:.2f}; p = {t['p']:.2g})")
+                f"(ln sd {t['ln_sd_between_canes']:.2f}{_se_text(t)}; p = {t['p']:.2g})")
     if t["p"] >= t["alpha"]:
         return f"one value for all canes (per-cane test: p = {t['p']:.2g})"
     return (f"one value for all canes (per-cane test: p = {t['p']:.2g}, but the canes' own values move ln k by "
@@ -203,3 +203,10 @@ def failure_reasons(adequacy: dict[str, Any]) -> list[str]:
                    f"average over {lv['n_canes']} canes (the allowance, {lv['excess']:.2g}, is for how a rig and an "
                    f"engine place contact; p = {lv['p']:.2g} < {alpha} beyond it)")
     return why
+
+
+def _se_text(t: Mapping[str, Any]) -> str:
+    """`` +- 17 %``: the standard error of ln omega from the test's sampling covariance (a relative
+    error of omega), or ``""`` without one (discovery.json written before it)."""
+    cov = t.get("cov_ln_median_ln_sd")
+    return f" +- {100 * math.sqrt(cov[1][1]):.0f} %" if cov else ""

@@ -43,7 +43,7 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize
 from scipy.special import logsumexp
 
-from ..model.effects import EFFECTS, AppliedEffects, EffectSpec, Parameter
+from ..model.effects import EFFECTS, AppliedEffects, EffectSpec, Parameter, Spread
 from .adequacy import geometry_draws
 from .fit import SIGMA_FLOOR
 from .screenset import Anchored
@@ -89,6 +89,9 @@ class PerCaneTest:
         Each cane's value (exp of its posterior mean of ln v) and the posterior sd of its ln v.
     reason
         Why it is (or is not) per cane, in words.
+    cov_ln
+        Sampling covariance of (ln median, ln omega) from the hierarchy's observed information
+        (:func:`sampling_cov`; None where omega is 0 or the information is not positive definite).
     """
 
     effect: str
@@ -104,11 +107,13 @@ class PerCaneTest:
     values: dict[str, float] = field(default_factory=dict)
     ln_sd_each: dict[str, float] = field(default_factory=dict)
     reason: str = ""
+    cov_ln: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"parameter": self.parameter, "unit": self.unit, "per_cane": self.per_cane,
                 "median": self.median, "ln_sd_between_canes": self.ln_sd, "lr": self.lr, "p": self.p,
                 "alpha": self.alpha, "spread_mean_abs_ln_k": self.spread, "reason": self.reason,
+                "cov_ln_median_ln_sd": None if self.cov_ln is None else [list(r) for r in self.cov_ln],
                 "values": dict(self.values), "ln_sd_each": dict(self.ln_sd_each)}
 
     def to_df(self) -> "Any":
@@ -122,12 +127,13 @@ class PerCaneTest:
         """``named`` with the scope this test found: per cane, each cane's own value as ``local``
         beside the global fit's value, which a cane the data do not have takes (the value the
         engines confirm, whose interval is drawn and whose gap is measured out of sample), and the
-        hierarchy's median and spread as ``between`` (what a population export draws a new cane's
-        value from); else ``named`` unchanged."""
+        hierarchy's median and spread, with their sampling covariance, as ``between`` (what a
+        population export draws a new cane's value from); else ``named`` unchanged."""
         if not self.per_cane:
             return named
         local = tuple(sorted((c, ((self.parameter, v),)) for c, v in self.values.items()))
-        return EffectSpec(named.name, named.params, local, "per_cane", ((self.parameter, (self.median, self.ln_sd)),))
+        return EffectSpec(named.name, named.params, local, "per_cane",
+                          ((self.parameter, Spread(self.median, self.ln_sd, self.cov_ln)),))
 
 
 def varying_parameter(name: str) -> str | None:
@@ -291,6 +297,59 @@ class _Hierarchy:
         return m, sd
 
 
+#: relative step (in each of mu, ln omega, ln s2, ln t2) of the observed information's central differences
+HESSIAN_STEP = 1e-2
+
+
+def sampling_cov(h: _Hierarchy, theta: np.ndarray,
+                 step: float = HESSIAN_STEP) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """The sampling covariance of (mu, ln omega) at the maximum-likelihood ``theta``: the
+    (mu, ln omega) block of the inverse observed information (central differences of
+    :meth:`_Hierarchy.nll` over mu, ln omega and the variances ln s2, ln t2, which it is
+    correlated with: a cane's own level and its own value move its pushes alike).
+
+    A variance at its floor (s2 below :data:`SIGMA_FLOOR`, t2 at 0) is held there, and where the
+    information with both variances free is not positive definite (a variance the data barely
+    pin near 0), they are held in turn; None where omega is 0 or no such information is positive
+    definite."""
+    theta = np.asarray(theta, float)
+    if not (np.all(np.isfinite(theta[:2])) and theta[1] > LOG_FLOOR):
+        return None
+    free = [0, 1] + [i for i in (2, 3) if math.isfinite(theta[i]) and theta[i] > LOG_FLOOR
+                     and (i != 2 or math.exp(theta[2]) > SIGMA_FLOOR**2)]
+    f0 = h.nll(theta)
+    memo: dict[tuple[int, ...], float] = {}
+
+    def f(*moves: tuple[int, int]) -> float:
+        key = tuple(sorted(moves))
+        if key not in memo:
+            t = theta.copy()
+            for i, sgn in moves:
+                t[i] += sgn * step
+            memo[key] = h.nll(t)
+        return memo[key]
+
+    H = np.empty((len(free), len(free)))
+    for a, i in enumerate(free):
+        H[a, a] = (f((i, 1)) - 2.0 * f0 + f((i, -1))) / step**2
+        for b in range(a):
+            j = free[b]
+            H[a, b] = H[b, a] = (f((i, 1), (j, 1)) - f((i, 1), (j, -1)) - f((i, -1), (j, 1))
+                                 + f((i, -1), (j, -1))) / (4.0 * step**2)
+    if max(memo.values()) >= 1e11:  # nll's stand-in for a density that is not finite
+        return None
+    for drop in ((), (3,), (2,), (2, 3)):
+        keep = [a for a, i in enumerate(free) if i not in drop]
+        Hk = H[np.ix_(keep, keep)]
+        try:
+            np.linalg.cholesky(Hk)
+        except np.linalg.LinAlgError:
+            continue
+        V = np.linalg.inv(Hk)[:2, :2]
+        return ((float(V[0, 0]), float(V[0, 1])), (float(V[0, 1]), float(V[1, 1])))
+    return None
+
+
 def _tables(at: Anchored, others: tuple[EffectSpec, ...], spec: EffectSpec,
             parameter: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The ln v grid about ``spec``'s value, each trial's prediction and each cane's calipers'
@@ -403,4 +462,5 @@ def per_cane_test(at: Anchored, log_k_field: np.ndarray, specs: tuple[EffectSpec
                   f"{spread:.3f} in mean |ln k|, under {min_change:.3g}: kept global")
     return PerCaneTest(name, parameter, unit, math.exp(x1[0]), omega, lr, p, alpha, spread, per,
                        {str(c): float(math.exp(v)) for c, v in zip(h.uniq, m)},
-                       {str(c): float(s) for c, s in zip(h.uniq, sd)}, reason)
+                       {str(c): float(s) for c, s in zip(h.uniq, sd)}, reason,
+                       sampling_cov(h, x1) if omega > 0 else None)

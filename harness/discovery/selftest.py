@@ -268,6 +268,10 @@ def _per_cane_scores(entry: dict[str, Any] | None, truth: dict[str, Any]) -> dic
     the data takes) against the drawn roots' geometric mean, the value the canes hold between them.
     ``per_cane_ln_sd_ratio``: the test's spread between canes (the ln sd a population export draws
     new canes' roots with) over the drawn roots' own (sample sd of their ln).
+    ``per_cane_ln_median_z`` and ``per_cane_ln_sd_z``: the test's ln median and ln omega less the
+    generator's (the law the canes were drawn from, not their sample), each over its standard error
+    from the test's sampling covariance (``cov_ln_median_ln_sd``; what a population export draws the
+    spread's uncertainty from): about standard normal where that covariance is right.
     """
     drawn = {c: v["k_root"] for c, v in truth["canes"].items() if "k_root" in v}
     out: dict[str, Any] = {"per_cane_found": bool(entry and entry.get("scope") == "per_cane")}
@@ -279,6 +283,11 @@ def _per_cane_scores(entry: dict[str, Any] | None, truth: dict[str, Any]) -> dic
     if len(drawn) >= 2 and out["per_cane_found"] and "ln_sd_between_canes" in test:
         sd = float(np.std(ln_drawn, ddof=1))
         out["per_cane_ln_sd_ratio"] = test["ln_sd_between_canes"] / sd if sd > 0 else math.nan
+    law = truth.get("effects", {}).get("root_compliance", {})
+    cov = test.get("cov_ln_median_ln_sd")
+    if out["per_cane_found"] and cov and law.get("ln_sd", 0) > 0 and law.get("k_root", 0) > 0:
+        out["per_cane_ln_median_z"] = (math.log(test["median"]) - math.log(law["k_root"])) / math.sqrt(cov[0][0])
+        out["per_cane_ln_sd_z"] = (math.log(test["ln_sd_between_canes"]) - math.log(law["ln_sd"])) / math.sqrt(cov[1][1])
     if drawn:
         out["per_cane_err_k_root"] = abs(entry["params"]["k_root"] / math.exp(np.mean(ln_drawn)) - 1.0)
     local = {c: v["k_root"] for c, v in (entry.get("local") or {}).items() if c in drawn}
@@ -384,7 +393,8 @@ def _per_cane_summary(df: pd.DataFrame) -> dict[str, Any]:
                          "per_cane_sets_found_per_cane": f"{int(_col(df, 'per_cane_found', False).sum())}/{len(df)}"}
     # each score's worst: r the lowest, errors the highest, the spread's ratio the farthest from 1 in ln
     worst = {"per_cane_r": np.argmin, "per_cane_rms_ln": np.argmax, "per_cane_err_k_root": np.argmax,
-             "per_cane_ln_sd_ratio": lambda v: np.argmax(np.abs(np.log(v)))}
+             "per_cane_ln_sd_ratio": lambda v: np.argmax(np.abs(np.log(v))),
+             "per_cane_ln_median_z": lambda v: np.argmax(np.abs(v)), "per_cane_ln_sd_z": lambda v: np.argmax(np.abs(v))}
     for c, pick in worst.items():
         v = df[c].dropna().to_numpy(float) if c in df else np.zeros(0)
         s[f"{c}_median"] = float(np.median(v)) if len(v) else math.nan

@@ -585,8 +585,17 @@ def per_cane_note(per_cane: Mapping[str, PerCaneTest]) -> str:
         f"not in the data takes the global fit's value, the one the engines confirm and the interval and the "
         f"gap out of sample are of; a population export (canebench export --field DIR --model model.yaml "
         f"--population N) draws each new cane's {t.parameter} from median {t.median:.4g} and ln sd "
-        f"{t.ln_sd:.2f} (between_canes)"
+        f"{t.ln_sd:.2f} (between_canes){_spread_error_text(t)}"
         for t in per_cane.values())
+
+
+def _spread_error_text(t: PerCaneTest) -> str:
+    """``, each uncertain by its standard error (ln median 0.07, ln ln sd 0.25)`` where the test has a
+    sampling covariance, else ``""``."""
+    if t.cov_ln is None:
+        return ""
+    return (f", each first drawn within its sampling error (standard errors {math.sqrt(t.cov_ln[0][0]):.2f} in ln "
+            f"median, {math.sqrt(t.cov_ln[1][1]):.2f} in ln ln sd)")
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:

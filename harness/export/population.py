@@ -22,7 +22,11 @@ draws:
 * **effects that vary between canes**: an effect whose model file gives its spread between canes
   (``between_canes``: discovery's per-cane root or collar, a log-normal with the fitted median and
   ln sd) takes a value drawn from it, as a new cane would, from a stream of its own (seeded
-  ``[S, i, 1]``, so the draws above are those of a model without it). The canes' own fitted values
+  ``[S, i, 1]``, so the draws above are those of a model without it). Where the file also gives
+  the fit's sampling covariance of (ln median, ln ln_sd) (``cov_ln``, which discovery writes), each
+  member first draws its median and ln sd from that normal (:meth:`~canebench.model.effects.Spread.draw`):
+  18 canes pin a spread to about 17 %, and a population drawn from the point estimate alone would
+  be narrower in its tails than the canes it stands for. The canes' own fitted values
   (``local``) are not used: a member is a new cane on a measured cane's geometry, as its modulus
   is drawn and not that cane's.
 
@@ -52,7 +56,8 @@ WHAT_IS_DRAWN = (
     "per draw i (rng seeded [seed, i]): cane = selection[i mod n]; modulus E ~ the named modulus distribution; "
     "each caliper diameter d_k + sigma e_k, e_k ~ N(0, 1), sigma = max(caliper_sd_m, the cane's diameter-fit "
     "residual sd), the diameter line refit through the drawn readings; an effect with a spread between canes "
-    "(between_canes) its value ~ median exp(ln_sd z) from a stream seeded [seed, i, 1], no cane's own value; "
+    "(between_canes) its value ~ median exp(ln_sd z) from a stream seeded [seed, i, 1], with (ln median, "
+    "ln ln_sd) first drawn from their sampling normal where the model gives cov_ln, no cane's own value; "
     "everything else from the model configuration"
 )
 

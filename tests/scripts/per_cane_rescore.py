@@ -16,10 +16,11 @@ import numpy as np
 
 from canebench.discovery.selftest import _per_cane_scores
 
-KEYS = ("per_cane_p", "per_cane_r", "per_cane_rms_ln", "per_cane_err_k_root", "per_cane_ln_sd_ratio")
+KEYS = ("per_cane_p", "per_cane_r", "per_cane_rms_ln", "per_cane_err_k_root", "per_cane_ln_sd_ratio",
+        "per_cane_ln_median_z", "per_cane_ln_sd_z")
 scores = {k: [] for k in KEYS}
 for root in sys.argv[1:]:
-    for case in sorted(Path(root).glob("*-per_cane-*")):
+    for case in sorted(p for p in Path(root).glob("*-per_cane-*") if p.is_dir()):
         doc = json.loads((case / "discovery.json").read_text())
         truth = json.loads((case / "truth" / "truth.json").read_text())
         entry = next((n for n in doc["named"] if n["effect"] == "root_compliance"), None)
