@@ -461,7 +461,7 @@ def test_a_population_carries_the_spreads_sampling_error_where_the_model_file_gi
     from canebench.model.effects import Spread
 
     n = 100_000
-    for a, b, c in ((0.03, 0.0, 0.04), (0.0, 0.0, 0.09), (0.02, 0.015, 0.03)):
+    for a, b, c in ((0.03, 0.0, 0.04), (0.0, 0.0, 0.09), (0.02, 0.015, 0.03), (0.02, -0.015, 0.03)):
         sp = Spread(25.0, 0.6, ((a, b), (b, c)))
         rng = np.random.default_rng(1)
         lv = np.log([sp.draw(rng) for _ in range(n)])
@@ -471,6 +471,11 @@ def test_a_population_carries_the_spreads_sampling_error_where_the_model_file_gi
         assert abs(lv.var() / var - 1) < 5 * np.sqrt((kurt_excess + 2) / n), (a, b, c, lv.var(), var)
         if a == 0:
             assert abs(kurt_excess - 3 * (np.exp(4 * c) - 1)) < 0.1 * 3 * (np.exp(4 * c) - 1) + 5 * np.sqrt(24 / n)
+        # the correlation b: E (ln v - E ln v)^3 = 3 E[m s^2] = 6 b ln_sd^2 exp(2 c) (Stein's lemma), within 5
+        # of the sample's standard errors; the sign of b flips it
+        x = (lv - lv.mean()) ** 3
+        want3 = 6 * b * 0.36 * np.exp(2 * c)
+        assert abs(x.mean() - want3) < 5 * x.std() / np.sqrt(n), (a, b, c, x.mean(), want3)
     # a covariance of zeros is the plug-in log-normal, though drawn from three normals, not one
     rng, zero = np.random.default_rng(2), Spread(25.0, 0.6, ((0.0, 0.0), (0.0, 0.0)))
     lv0 = np.log([zero.draw(rng) for _ in range(n)])
@@ -488,10 +493,11 @@ def test_between_canes_in_a_model_file_is_checked_and_survives_a_round_trip(tmp_
     cfg = load_model_file(path)
     write_model_file(tmp_path / "again.yaml", cfg, preset="beam-consistent")
     assert load_model_file(tmp_path / "again.yaml").effects == cfg.effects
-    # and with the spread's sampling covariance
-    path.write_text(PER_CANE_MODEL.replace("ln_sd: 0.6}", "ln_sd: 0.6, cov_ln: [[0.02, -0.004], [-0.004, 0.03]]}"))
+    # and with the spread's sampling covariance; YAML 1.1 reads 2.5e1 (no sign in the exponent) as text
+    path.write_text(PER_CANE_MODEL.replace("median: 25.0, ln_sd: 0.6}",
+                                           "median: 2.5e1, ln_sd: 0.6, cov_ln: [[0.02, -0.004], [-0.004, 3e-2]]}"))
     cov = load_model_file(path)
-    assert dict(cov.effects[0].between)["k_root"].cov_ln == ((0.02, -0.004), (-0.004, 0.03))
+    assert dict(cov.effects[0].between)["k_root"] == (25.0, 0.6, ((0.02, -0.004), (-0.004, 0.03)))
     write_model_file(tmp_path / "again.yaml", cov, preset="beam-consistent")
     assert load_model_file(tmp_path / "again.yaml").effects == cov.effects
     # a trial's model (job keys) does not carry it: the same physics whatever the spread
@@ -512,7 +518,14 @@ def test_between_canes_in_a_model_file_is_checked_and_survives_a_round_trip(tmp_
                        ("{k_root: {median: 20, ln_sd: 0.5, cov_ln: [[0.01, .nan], [.nan, 0.01]]}}", "k_root.cov_ln"),
                        ("{k_root: {median: 20, ln_sd: 0.5, cov_ln: [0.01, 0.0, 0.01]}}", "k_root.cov_ln"),
                        ("{k_root: {median: 20, ln_sd: 0.5, cov_ln: [[a, 0], [0, 0.01]]}}", "k_root.cov_ln"),
-                       ("{k_root: {median: 20, ln_sd: 0.0, cov_ln: [[0.01, 0.0], [0.0, 0.01]]}}", "k_root.cov_ln")):
+                       ("{k_root: {median: 20, ln_sd: 0.0, cov_ln: [[0.01, 0.0], [0.0, 0.01]]}}", "k_root.cov_ln"),
+                       # beyond COV_LN_MAX (a draw could overflow) and LN_SD_MAX; a YAML int too large for a float
+                       ("{k_root: {median: 20, ln_sd: 0.5, cov_ln: [[2.0, 0.0], [0.0, 0.01]]}}", "k_root.cov_ln"),
+                       ("{k_root: {median: 20, ln_sd: 0.5, cov_ln: [[0.01, 0.0], [0.0, 0.5]]}}", "k_root.cov_ln"),
+                       ("{k_root: {median: 20, ln_sd: 0.5, cov_ln: [[1.0e+200, 0], [0, 1.0e+200]]}}", "k_root.cov_ln"),
+                       ("{k_root: {median: 20, ln_sd: 0.5, cov_ln: [[1%s, 0], [0, 0.01]]}}" % ("0" * 400), "k_root.cov_ln"),
+                       ("{k_root: {median: 1%s, ln_sd: 0.5}}" % ("0" * 400), "k_root"),
+                       ("{k_root: {median: 20, ln_sd: 7.0}}", "k_root.ln_sd")):
         path.write_text(PER_CANE_MODEL.replace("{k_root: {median: 25.0, ln_sd: 0.6}}", bad))
         with pytest.raises(InputError) as exc:
             load_model_file(path)
@@ -532,6 +545,16 @@ def test_between_canes_in_a_model_file_is_checked_and_survives_a_round_trip(tmp_
     assert spread_only.effects[0].between and not spread_only.effects[0].local
     assert spread_only.localized("b1c1", "b1c1t1") == spread_only.replace(
         effects=tuple(dataclasses.replace(e, between=()) for e in spread_only.effects))
+    # built in Python: lists hash and compare as the file's tuples; out-of-range values are named on use
+    from canebench.model.effects import EffectSpec
+
+    listed = EffectSpec("root_compliance", (("k_root", 30.0),), (), "per_cane",
+                        (("k_root", (25, 0.6, [[0.02, -0.004], [-0.004, 0.03]])),))
+    assert listed.between == cov.effects[0].between and hash(listed.between) == hash(cov.effects[0].between)
+    for bad, field in (((25.0, 0.6, ((-0.02, 0.0), (0.0, 0.03))), "k_root.cov_ln"), ((25.0, -0.6), "k_root.ln_sd"),
+                       ((25.0, 0.6, "x"), "between_canes.k_root"), ((25.0,), "between_canes.k_root")):
+        with pytest.raises(InputError, match=field):
+            ModelConfig(effects=(EffectSpec("root_compliance", (("k_root", 30.0),), (), "per_cane", (("k_root", bad),)),))
 
 
 def test_a_population_draws_only_the_parameter_that_varies_and_warns_where_no_spread_was_written(data):

@@ -43,7 +43,7 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize
 from scipy.special import logsumexp
 
-from ..model.effects import EFFECTS, AppliedEffects, EffectSpec, Parameter, Spread
+from ..model.effects import COV_LN_MAX, EFFECTS, AppliedEffects, EffectSpec, Parameter, Spread
 from .adequacy import geometry_draws
 from .fit import SIGMA_FLOOR
 from .screenset import Anchored
@@ -133,7 +133,16 @@ class PerCaneTest:
             return named
         local = tuple(sorted((c, ((self.parameter, v),)) for c, v in self.values.items()))
         return EffectSpec(named.name, named.params, local, "per_cane",
-                          ((self.parameter, Spread(self.median, self.ln_sd, self.cov_ln)),))
+                          ((self.parameter, Spread(self.median, self.ln_sd, self.drawable_cov())),))
+
+    def drawable_cov(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """``cov_ln`` where a population may draw within it (variances within
+        :data:`~canebench.model.effects.COV_LN_MAX`), else None: a spread known worse than that is
+        drawn from its point estimate, and discovery's note says so."""
+        if self.cov_ln is None:
+            return None
+        (a, _), (_, c) = self.cov_ln
+        return self.cov_ln if a <= COV_LN_MAX[0] and c <= COV_LN_MAX[1] else None
 
 
 def varying_parameter(name: str) -> str | None:
@@ -308,17 +317,17 @@ def sampling_cov(h: _Hierarchy, theta: np.ndarray,
     :meth:`_Hierarchy.nll` over mu, ln omega and the variances ln s2, ln t2, which it is
     correlated with: a cane's own level and its own value move its pushes alike).
 
-    A variance at its floor (s2 below :data:`SIGMA_FLOOR`, t2 at 0) is held there, and where the
-    information with both variances free is not positive definite (a variance the data barely
-    pin near 0), they are held in turn; None where omega is 0 or no such information is positive
-    definite."""
+    A variance within a step of its floor (s2 at :data:`SIGMA_FLOOR`, t2 at 0), where the likelihood
+    is flat on one side, is held there. None where omega is 0 or the information is not positive
+    definite: a spread the data do not pin apart from the canes' own levels has no standard error
+    to give, and holding a variance to get one would give the error as if that variance were known."""
     theta = np.asarray(theta, float)
     if not (np.all(np.isfinite(theta[:2])) and theta[1] > LOG_FLOOR):
         return None
-    free = [0, 1] + [i for i in (2, 3) if math.isfinite(theta[i]) and theta[i] > LOG_FLOOR
-                     and (i != 2 or math.exp(theta[2]) > SIGMA_FLOOR**2)]
+    floors = {2: 2.0 * math.log(SIGMA_FLOOR), 3: LOG_FLOOR}
+    free = [0, 1] + [i for i in (2, 3) if math.isfinite(theta[i]) and theta[i] - step > floors[i]]
     f0 = h.nll(theta)
-    memo: dict[tuple[int, ...], float] = {}
+    memo: dict[tuple[tuple[int, int], ...], float] = {}
 
     def f(*moves: tuple[int, int]) -> float:
         key = tuple(sorted(moves))
@@ -338,16 +347,12 @@ def sampling_cov(h: _Hierarchy, theta: np.ndarray,
                                  + f((i, -1), (j, -1))) / (4.0 * step**2)
     if max(memo.values()) >= 1e11:  # nll's stand-in for a density that is not finite
         return None
-    for drop in ((), (3,), (2,), (2, 3)):
-        keep = [a for a, i in enumerate(free) if i not in drop]
-        Hk = H[np.ix_(keep, keep)]
-        try:
-            np.linalg.cholesky(Hk)
-        except np.linalg.LinAlgError:
-            continue
-        V = np.linalg.inv(Hk)[:2, :2]
-        return ((float(V[0, 0]), float(V[0, 1])), (float(V[0, 1]), float(V[1, 1])))
-    return None
+    try:
+        np.linalg.cholesky(H)
+    except np.linalg.LinAlgError:
+        return None
+    V = np.linalg.inv(H)[:2, :2]
+    return ((float(V[0, 0]), float(V[0, 1])), (float(V[0, 1]), float(V[1, 1])))
 
 
 def _tables(at: Anchored, others: tuple[EffectSpec, ...], spec: EffectSpec,

@@ -590,12 +590,15 @@ def per_cane_note(per_cane: Mapping[str, PerCaneTest]) -> str:
 
 
 def _spread_error_text(t: PerCaneTest) -> str:
-    """``, each uncertain by its standard error (ln median 0.07, ln ln sd 0.25)`` where the test has a
-    sampling covariance, else ``""``."""
+    """How a population treats the spread's own error: drawn within it (its standard errors), or why not."""
     if t.cov_ln is None:
-        return ""
-    return (f", each first drawn within its sampling error (standard errors {math.sqrt(t.cov_ln[0][0]):.2f} in ln "
-            f"median, {math.sqrt(t.cov_ln[1][1]):.2f} in ln ln sd)")
+        return ("; their sampling error is not known (the hierarchy's information is not positive definite: the "
+                "spread is not pinned apart from the canes' own levels), so a population draws from them as if exact")
+    se = (math.sqrt(t.cov_ln[0][0]), math.sqrt(t.cov_ln[1][1]))
+    if t.drawable_cov() is None:
+        return (f"; their standard errors ({se[0]:.2f} in ln median, {se[1]:.2f} in ln ln sd) are too large to draw "
+                f"within, so a population draws from them as if exact")
+    return f", each first drawn within its sampling error (standard errors {se[0]:.2f} in ln median, {se[1]:.2f} in ln ln sd)"
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:

@@ -294,6 +294,27 @@ def _pairs(d: Mapping[str, Any]) -> _Pairs:
     return tuple(sorted((str(k), float(v)) for k, v in d.items()))
 
 
+#: the largest ln sd between canes a model file may give (a factor e^5 = 148 per sd: no cane's root or
+#: collar spreads so; beyond it a log-normal draw overflows before it means anything)
+LN_SD_MAX = 5.0
+#: the largest sampling variances of (ln median, ln ln_sd) a model file may give: a median uncertain
+#: by a factor e, a spread by a factor e^0.5 = 1.65, at one standard error. A spread known worse than
+#: that is not one to draw new canes within (discovery then writes none, and says so), and beyond it
+#: a member's drawn spread can reach hundreds and its value overflow
+COV_LN_MAX = (1.0, 0.25)
+
+
+def _number(x: Any) -> float:
+    """A model file's number: an int, a float, or a numeric string (YAML 1.1 reads ``2e1`` as text);
+    ValueError for anything else (booleans, None, words) or a number too large for a float."""
+    if isinstance(x, bool) or x is None or not isinstance(x, (int, float, str)):
+        raise ValueError(x)
+    try:
+        return float(x)
+    except OverflowError:
+        raise ValueError(x) from None
+
+
 class Spread(NamedTuple):
     """How one parameter varies between canes: log-normal, median ``median``, sd of its log ``ln_sd``.
 
@@ -327,29 +348,45 @@ class Spread(NamedTuple):
             d["cov_ln"] = [list(r) for r in self.cov_ln]
         return d
 
+    def check(self, source: str, where: str) -> None:
+        """InputError naming ``source`` and ``where`` (``root_compliance.between_canes.k_root``) unless
+        the median is finite and > 0, the ln sd finite in [0, :data:`LN_SD_MAX`] and ``cov_ln``, if
+        given, a valid covariance (:func:`check_cov_ln`) beside an ln sd > 0."""
+        if not (isinstance(self.median, float) and math.isfinite(self.median) and self.median > 0):
+            raise InputError(source, f"{where}.median", f"must be a finite number > 0, got {self.median!r}")
+        if not (isinstance(self.ln_sd, float) and math.isfinite(self.ln_sd) and 0 <= self.ln_sd <= LN_SD_MAX):
+            raise InputError(source, f"{where}.ln_sd", f"must be a finite number in [0, {LN_SD_MAX:g}], got {self.ln_sd!r}")
+        if self.cov_ln is not None:
+            check_cov_ln(self.cov_ln, source, f"{where}.cov_ln")
+            if self.ln_sd <= 0:
+                raise InputError(source, f"{where}.cov_ln", "a sampling covariance of ln ln_sd needs ln_sd > 0")
 
-def _cov_ln(obj: Any, source: str, where: str) -> tuple[tuple[float, float], tuple[float, float]]:
-    """A model file's ``cov_ln``: a symmetric positive semi-definite 2 x 2 of finite numbers."""
-    bad = InputError(source, where, f"expected a symmetric positive semi-definite [[a, b], [b, c]] of numbers, got {obj!r}")
+
+def check_cov_ln(obj: Any, source: str, where: str) -> tuple[tuple[float, float], tuple[float, float]]:
+    """``cov_ln`` as a tuple of float tuples: a symmetric positive semi-definite 2 x 2 [[a, b], [b, c]] of
+    finite numbers with a <= 1 and c <= 0.25 (:data:`COV_LN_MAX`); InputError naming ``source`` and
+    ``where`` otherwise."""
+    what = (f"expected a symmetric positive semi-definite [[a, b], [b, c]] of numbers with 0 <= a <= "
+            f"{COV_LN_MAX[0]:g} and 0 <= c <= {COV_LN_MAX[1]:g}, got {obj!r}")
     if not isinstance(obj, (list, tuple)) or len(obj) != 2 or not all(isinstance(r, (list, tuple)) and len(r) == 2
                                                                         for r in obj):
-        raise bad
-    if any(isinstance(x, (bool, str)) or x is None for r in obj for x in r):
-        raise bad
+        raise InputError(source, where, what)
     try:
-        (a, b), (b2, c) = ((float(x) for x in r) for r in obj)
-    except (TypeError, ValueError):
-        raise bad from None
-    if not all(math.isfinite(x) for x in (a, b, b2, c)):
-        raise bad
-    if abs(b - b2) > 1e-9 * max(abs(b), abs(b2), 1e-300) or a < 0 or c < 0 or a * c - b * b < -1e-12 * max(a * c, 1e-300):
-        raise bad
+        (a, b), (b2, c) = ((_number(x) for x in r) for r in obj)
+    except ValueError:
+        raise InputError(source, where, what) from None
+    if not all(math.isfinite(x) for x in (a, b, b2, c)) or not (0 <= a <= COV_LN_MAX[0] and 0 <= c <= COV_LN_MAX[1]):
+        raise InputError(source, where, what)
+    # bounded above, so the products below cannot overflow
+    if abs(b - b2) > 1e-9 * max(abs(b), abs(b2), 1e-300) or b * b > a * c * (1 + 1e-9):
+        raise InputError(source, where, what)
     return ((a, b), (b, c))
 
 
 def _between(obj: Any, source: str) -> tuple[tuple[str, Spread], ...]:
     """A model file's ``between_canes`` ({parameter: {median, ln_sd[, cov_ln]}}) as
-    :attr:`EffectSpec.between` (absent: None or an empty mapping)."""
+    :attr:`EffectSpec.between` (absent: None or an empty mapping). The values' ranges are checked
+    with the rest of the effect (:meth:`Spread.check`, from :meth:`EffectSpec.validate`)."""
     if obj is None:
         return ()
     if not isinstance(obj, Mapping):
@@ -358,15 +395,28 @@ def _between(obj: Any, source: str) -> tuple[tuple[str, Spread], ...]:
     for k, v in obj.items():
         if not isinstance(v, Mapping) or not {"median", "ln_sd"} <= set(v) <= {"median", "ln_sd", "cov_ln"}:
             raise InputError(source, str(k), f"expected {{median: ..., ln_sd: ...[, cov_ln: ...]}}, got {v!r}")
-        if any(isinstance(v[x], (bool, str)) or v[x] is None for x in ("median", "ln_sd")):
-            raise InputError(source, str(k), f"median and ln_sd must be numbers, got {dict(v)!r}")
         try:
-            median, ln_sd = float(v["median"]), float(v["ln_sd"])
-        except (TypeError, ValueError):
+            median, ln_sd = _number(v["median"]), _number(v["ln_sd"])
+        except ValueError:
             raise InputError(source, str(k), f"median and ln_sd must be numbers, got {dict(v)!r}") from None
-        cov = _cov_ln(v["cov_ln"], source, f"{k}.cov_ln") if v.get("cov_ln") is not None else None
+        cov = check_cov_ln(v["cov_ln"], source, f"{k}.cov_ln") if v.get("cov_ln") is not None else None
         out.append((str(k), Spread(median, ln_sd, cov)))
     return tuple(sorted(out))
+
+
+def _as_spread(v: Any) -> Any:
+    """``v`` as a :class:`Spread` of floats with ``cov_ln`` as float tuples, where it can be read so;
+    else ``v`` unchanged (:meth:`EffectSpec.validate` then names it)."""
+    try:
+        median, ln_sd, *rest = v
+        if len(rest) > 1:
+            return v
+        cov = rest[0] if rest else None
+        if cov is not None:
+            cov = tuple(tuple(_number(x) for x in r) for r in cov)
+        return Spread(_number(median), _number(ln_sd), cov)
+    except (TypeError, ValueError):
+        return v
 
 
 @dataclass(frozen=True)
@@ -396,10 +446,10 @@ class EffectSpec:
     between: tuple[tuple[str, Spread], ...] = ()
 
     def __post_init__(self) -> None:
-        # a spread given as a plain (median, ln_sd[, cov_ln]) tuple (from Python) is a Spread, so that
-        # equal specs compare and hash equal however they were written
-        if any(not isinstance(v, Spread) for _, v in self.between):
-            object.__setattr__(self, "between", tuple((str(k), Spread(*v)) for k, v in self.between))
+        # a spread given as a plain (median, ln_sd[, cov_ln]) tuple, or with lists (from Python), is a
+        # Spread of floats and tuples, so that equal specs compare and hash equal however they were
+        # written; what cannot be read so is left for validate() to name
+        object.__setattr__(self, "between", tuple((str(k), _as_spread(v)) for k, v in self.between))
 
     @classmethod
     def parse(cls, obj: Any, source: str = "effects") -> "EffectSpec":
@@ -474,7 +524,7 @@ class EffectSpec:
                 ok = math.isfinite(v) or v == par.null
                 if not ok or (par.log and v <= 0) or v < par.minimum:
                     raise InputError(source, f"{self.name}{where}.{k}", f"invalid value {v!r} ({par.unit})")
-        for k, (median, ln_sd, cov) in self.between:
+        for k, spread in self.between:
             where = f"{self.name}.between_canes.{k}"
             if k not in cls.parameters:
                 raise InputError(source, where, f"unknown parameter; {self.name} has {', '.join(cls.parameters)}")
@@ -484,12 +534,9 @@ class EffectSpec:
             if k != varies:
                 raise InputError(source, where, f"{self.name}.{k} cannot vary between canes"
                                  + (f" (only {varies} can)" if varies else f" ({self.name} is one value for all canes)"))
-            if not (math.isfinite(median) and median > 0):
-                raise InputError(source, f"{where}.median", f"must be a finite number > 0, got {median!r}")
-            if not (math.isfinite(ln_sd) and ln_sd >= 0):
-                raise InputError(source, f"{where}.ln_sd", f"must be a finite number >= 0, got {ln_sd!r}")
-            if cov is not None and ln_sd <= 0:
-                raise InputError(source, f"{where}.cov_ln", "a sampling covariance of ln ln_sd needs ln_sd > 0")
+            if not isinstance(spread, Spread):
+                raise InputError(source, where, f"expected (median, ln_sd[, cov_ln]) numbers, got {spread!r}")
+            spread.check(source, where)
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"effect": self.name, "scope": self.scope, "params": dict(self.params)}
