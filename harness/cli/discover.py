@@ -86,8 +86,8 @@ def main(a: argparse.Namespace) -> int:
         print(f"  {n}")
     for n in doc["named"] + doc.get("partial", []):
         what = ("named" if n in doc["named"] else
-                "partial (not named: the model does not fit how stiffness scales across or along canes, or the "
-                "traces' shape)")
+                "partial (not named: the model does not fit how stiffness scales across or along canes or the "
+                "traces' shape, or needs a parameter at the end of its physical range)")
         if n["effect"] == "obstruction":
             early = n.get("n_excluded_early_contact", 0)
             print(f"  named: obstruction in {n['n_trials']} trial(s)"
@@ -137,5 +137,5 @@ def _part(text: str, fmt: str) -> str:
 def _params_text(n: dict) -> str:
     """``k = v unit [lo, hi]`` for each parameter of a named (or not named) effect in discovery.json."""
     units, ci = n.get("units", {}), n.get("ci95", {})
-    return ", ".join(f"{k} = {v:.4g}" + (f" {units[k]}" if units.get(k) else "")
+    return ", ".join(f"{k} = {v:.4g}" + (f" {units[k]}" if units.get(k) not in (None, "", "1") else "")
                      + (f" [{ci[k][0]:.4g}, {ci[k][1]:.4g}]" if k in ci else "") for k, v in n["params"].items())

@@ -169,6 +169,12 @@ def failure_reasons(adequacy: dict[str, Any]) -> list[str]:
     failed = set(adequacy.get("failed") or ())
     alpha = adequacy.get("alpha")
     why: list[str] = []
+    if "edge" in failed:
+        why.append("needs " + ", ".join(f"{e['effect']} {e['parameter']} = {e['value']:.4g}"
+                                        + (f" {e['unit']}" if e['unit'] not in ("", "1") else "")
+                                        + f" (its physical range {e['low']:g} to {e['high']:g})"
+                                        for e in adequacy["at_edge"])
+                   + ", at the end of the range: the effect takes what it can of something it cannot be")
     if "trend" in failed:
         a = adequacy["after_cv"]
         why.append(f"does not scale across canes as the data do: the held-out residual "

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..data.dataset import Trial
 from ..data.rig import read_rig_csv
+from ..errors import InputError
 from ..execute.pipeline import SIM_TRAVEL_MM, field_stage
 from ..measure.field import FieldFit, contact_samples, extract_field_stiffness
 from ..model.config import ModelConfig
@@ -124,7 +125,7 @@ def contact_levels(trials: list, geoms: dict, fields: dict,
     by_cane: dict[str, list[float]] = {}
     for tid, fr in fields.items():
         k = fr.k
-        if tid in exclude or not (np.isfinite(k) and k > 0 and np.isfinite(k_model[tid])):
+        if tid in exclude or not (np.isfinite(k) and k > 0 and np.isfinite(k_model.get(tid, math.nan))):
             continue
         by_cane.setdefault(cane_of[tid], []).append(math.log(k / k_model[tid]))
     return k_model, by_cane, [v for vs in by_cane.values() for v in vs]
@@ -148,7 +149,8 @@ def split_early_contacts(early: dict, trials: list, geoms: dict, fields: dict,
     kept, drifts = {}, {}
     for tid, e in early.items():
         levels = [float(np.median(v)) for v in (by_cane.get(cane_of[tid]), pooled) if v]
-        if not levels or any(ramp_is_the_cane(e, k_model[tid] / GF_TO_N, lv) for lv in levels):
+        k_m = k_model.get(tid, math.nan)  # NaN: no model of the trial (it is not scored): kept as is
+        if not levels or not np.isfinite(k_m) or any(ramp_is_the_cane(e, k_m / GF_TO_N, lv) for lv in levels):
             kept[tid] = e
         else:
             drifts[tid] = e
@@ -199,7 +201,8 @@ class FieldContacts:
     #: the baseline's configuration with the obstruction found (if any) as its only effect: the second
     #: field stage's, and the one the baseline engines run
     config: ModelConfig
-    #: the screen's geometry of every trial (:func:`.screen.trial_geometry` on the base configuration)
+    #: the screen's geometry of every trial (:func:`.screen.trial_geometry` on the base configuration),
+    #: but one whose model cannot be built (its baseline run fails with the reason)
     geoms: dict[str, Any]
     #: seconds spent building :attr:`geoms`
     geometry_s: float
@@ -234,7 +237,15 @@ def read_contacts(trials: list[Trial], fit_window_mm: float, cfg0: ModelConfig) 
     # its stiffness the obstruction's; such trials cannot be scored and are left out of the fit
     early = early_contacts(fields0, knees={k: rc.fit.onset_mm for k, rc in recontact.items()})
     t_g = time.perf_counter()  # the screen's geometry, needed here to tell a drift from a contact
-    geoms = {t.id: trial_geometry(t, cfg0) for t in trials}
+    geoms = {}
+    for t in trials:
+        try:
+            geoms[t.id] = trial_geometry(t, cfg0)
+        except InputError:
+            # no model of this trial can be built (calipers whose line gives no cane at the push): it has
+            # no geometry here; its baseline run fails at the chain with the same reason, which the trial
+            # table gives as why it is not scored
+            pass
     geometry_s = time.perf_counter() - t_g
     early, drifts = split_early_contacts(early, trials, geoms, fields0, onsets)
     for tid in early:

@@ -58,9 +58,9 @@ WITHIN_EXCESS = 8.0
 #: takes most of the compliance the caliper line's share all but vanishes: the self-test's
 #: root + pitch pair (seed 7, set 37), both named right, spread 0.054 at 9.8 times the line's
 WITHIN_FLOOR = 0.10
-#: why names are withheld (the three adequacy checks), in every output that says so
+#: why names are withheld (the adequacy checks), in every output that says so
 INADEQUATE = ("does not scale across canes, share the stiffness along a cane (in trend or in spread), or bend the "
-              "traces as the data do")
+              "traces as the data do, or needs a value at the end of a parameter's physical range")
 #: what sets ``unexplained``, as the CLI and the report say it
 UNEXPLAINED_WHY = (f"residual structure, a model that {INADEQUATE}, an effect that passed the selection but not its "
                    f"interval, or a best fit too small to name")
@@ -139,7 +139,12 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
     if shape_p is not None and adequacy["shape"]["p_floor"] >= ADEQUACY_ALPHA:
         notes.append(f"shape check: {adequacy['shape']['n_canes']} canes' sign flips cannot give p below "
                      f"{adequacy['shape']['p_floor']:.2g}, so it cannot withhold a name at {ADEQUACY_ALPHA}")
-    if within_fails and not (trend_fails or shape_fails or dispersion_fails or shape_level_fails) and current:
+    # a fit pressed against the end of a parameter's physical range (a modulus five times the stated
+    # one): the library's effect takes what it can of something else; nothing named accounts for it
+    adequacy["at_edge"] = at_physical_edge(tuple(final.fit.specs))
+    edge_fails = bool(adequacy["at_edge"])
+    if within_fails and not (trend_fails or shape_fails or dispersion_fails or shape_level_fails
+                             or edge_fails) and current:
         # the trend along the canes would be the only reason to withhold the names: if an unnamed
         # flare takes it, it is a taper fuller or leaner below the calipers than their line, below
         # the naming rules, not an effect outside the library (WITHIN_TAKERS)
@@ -150,7 +155,8 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
         adequacy["within_taken_by"], adequacy["within_tried"] = taken, tried
         timing["within_taken_s"] = time.perf_counter() - t_w
         within_fails = taken is None
-    adequacy["failed"] = [name for name, fails in (("trend", trend_fails), ("within", within_fails),
+    adequacy["failed"] = [name for name, fails in (("edge", edge_fails), ("trend", trend_fails),
+                                                  ("within", within_fails),
                                                   ("dispersion", dispersion_fails), ("shape", shape_fails),
                                                   ("shape_level", shape_level_fails)) if fails]
     adequacy["inadequate"] = bool(adequacy["failed"])
@@ -191,6 +197,25 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
                      f"calipers' own error can make it (p = {adequacy['after_cv']['p']:.2g} against that null): the "
                      f"names stand; the model may still be incomplete")
     return Verdict(sb, sa, adequacy, unexplained, named, partial)
+
+
+def at_physical_edge(specs: tuple[Any, ...]) -> list[dict[str, Any]]:
+    """The fitted parameters pressed against the end of their physical range away from their null
+    (:attr:`~canebench.model.effects.Parameter.physical_bounds`): ``effect``, ``parameter``,
+    ``value``, ``unit`` and the range (``low``, ``high``), one dict each."""
+    out = []
+    for spec in specs:
+        pars = EFFECTS[spec.name].parameters
+        for k, v in spec.params:
+            par = pars.get(k)
+            if par is None or not par.physical_bounds:
+                continue
+            nb = null_bound(par)
+            for b in (par.low, par.high):
+                if at_bound(v, b) and not (math.isfinite(nb) and at_bound(b, nb)):
+                    out.append({"effect": spec.name, "parameter": k, "value": float(v), "unit": par.unit,
+                                "low": par.low, "high": par.high})
+    return out
 
 
 def within_after(cv: Any, at: Anchored, canes: np.ndarray, height: np.ndarray, factor: float,

@@ -63,6 +63,13 @@ class Parameter:
     minimum : float
         Smallest physically valid value (beyond the search bounds: a model
         file may set any valid value).
+    physical_bounds : bool
+        Whether ``low`` and ``high`` are the ends of the physically plausible range (a modulus 0.2 to 5
+        times the stated one, a root no softer than 0.3 N m/rad, a rig no softer than 20 N/m, a pitch
+        within 45 degrees): a fit pressed against the end away from ``null`` says the effect cannot
+        account for the data within physics, and the discovery workflow does not name it. False where
+        a bound only limits the search (a flare's excess and length trade off, and a true flare is fitted
+        at the 25 mm bound with a shorter length).
     switches_off : bool
         Whether this parameter at ``null`` alone switches the effect off,
         whatever the others are (a flare's excess does; its length, whose
@@ -80,6 +87,7 @@ class Parameter:
     doc: str = ""
     minimum: float = -math.inf
     switches_off: bool = True
+    physical_bounds: bool = True
 
 
 class Effect:
@@ -205,8 +213,10 @@ class BaseFlare(Effect):
     summary = ("the cane thickens toward the base beyond the linear caliper fit: "
                "d(s) = d_fit(s) + excess_mm exp(-s / length_mm)")
     where = "geometry"
-    parameters = {"excess_mm": Parameter("mm", 0.0, 25.0, 0.0, False, "extra diameter at the ground", minimum=0.0),
+    parameters = {"excess_mm": Parameter("mm", 0.0, 25.0, 0.0, False, "extra diameter at the ground", minimum=0.0,
+                                         physical_bounds=False),
                   "length_mm": Parameter("mm", 20.0, 600.0, 150.0, True, "e-folding length of the excess",
+                                          physical_bounds=False,
                                           switches_off=False)}
     #: a collar is its cane's: discovery asks whether the excess differs between canes
     scopes = ("global", "per_cane")
@@ -234,12 +244,13 @@ class Obstruction(Effect):
     summary = "in some trials a second body engages partway (elbow): scored only up to onset_mm of contact"
     where = "trial"
     parameters = {"onset_mm": Parameter("mm", 1.0, 200.0, math.inf, False,
-                                        "displacement after contact at which the second body engages"),
+                                        "displacement after contact at which the second body engages",
+                                        physical_bounds=False),
                   "record_end_mm": Parameter("mm", 0.0, 1000.0, math.inf, False,
                                              "where the field record is cut (travel from its first sample): set at "
                                              "the elbow where the elbow hides the contact knee from the field "
                                              "stage, so the contact is found before it", minimum=0.0,
-                                             switches_off=False)}
+                                             switches_off=False, physical_bounds=False)}
     scopes = ("per_trial",)
 
     def fit_window_mm(self) -> float | None:
