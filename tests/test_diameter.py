@@ -37,3 +37,42 @@ def test_factor_scales_slope_about_centroid(factor):
 def test_single_caliper_is_constant():
     f = fit_diameter(np.array([0.7]), np.array([0.01]))
     np.testing.assert_allclose(f(np.array([0.0, 1.2])), 0.01)
+
+
+def _with_calipers(tmp_path, calipers):
+    """The bundled cane b1c1 (pushes at 0.634-0.802 m, tip near 1.07 m) with ``calipers`` (height, d)."""
+    import yaml
+
+    from canebench.data.cane import load_cane
+    from canebench.data.dataset import bundled_dataset
+
+    doc = yaml.safe_load((bundled_dataset() / "canes" / "b1c1.yaml").read_text())
+    doc["calipers"] = [{"height": h, "diameter": d} for h, d in calipers]
+    path = tmp_path / "b1c1.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return load_cane(path), path
+
+
+def test_a_calipers_line_that_gives_no_cane_at_the_push_is_refused_naming_the_file(tmp_path):
+    """Calipers near the ground of a flared cane (30, 20, 13.5 mm at 0.05-0.30 m) give a line that
+    crosses zero near 0.5 m, below every push: the chain of such a cane is thread and its stiffness
+    no answer, so it is refused with the file, the field and the push. A line that ends above the
+    push (on the way to the tip) is only clamped there, with a warning, as before: it changes the
+    weight beyond the push, not the bending between base and push."""
+    from canebench.errors import InputError
+    from canebench.model.chain import build_chain
+    from canebench.model.config import ModelConfig
+
+    cane, path = _with_calipers(tmp_path, [(0.05, 0.030), (0.20, 0.020), (0.30, 0.0135)])
+    for push in ("1", "3"):
+        with pytest.raises(InputError) as exc:
+            build_chain(cane, push, ModelConfig())
+        msg = str(exc.value)
+        assert str(path) in msg and "'calipers'" in msg and f"push point {push}" in msg, msg
+        assert "below the 1 mm floor" in msg
+    # the same calipers with a diameter factor of 0 (the centroid's diameter everywhere) are a cane
+    assert build_chain(cane, "1", ModelConfig(diameter_factor=0.0)).n_links > 0
+    # steep calipers at the pushes: positive at every push, below the floor before the tip
+    cane, _ = _with_calipers(tmp_path, [(0.802, 0.0060), (0.717, 0.0099), (0.634, 0.0140)])
+    chain = build_chain(cane, "1", ModelConfig())
+    assert any("were clamped" in w for w in chain.meta["warnings"])

@@ -2712,3 +2712,87 @@ def test_a_trial_left_out_is_listed_once_an_obstructed_one_with_its_onset():
                                                     "< 0.8); sim (no baseline stiffness: diverged); stiff (no field "
                                                     "stiffness: x)")
     assert not_scored_note(["a"], [""], {"a": 1.0}) == ({}, "")
+
+
+def test_discover_leaves_out_a_trial_no_model_can_be_built_for_and_goes_on(tmp_path):
+    """A cane whose calipers' line reaches the diameter floor below its pushes (calipers near the
+    ground of a flared cane) has no model: its three trials are listed as not scored with the
+    chain's reason (the file and the calipers), and the other canes are scored as usual; before,
+    the screen's geometry raised and ended the run."""
+    import shutil
+
+    import yaml
+
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.execute.executors import make_executor
+
+    d = tmp_path / "data"
+    shutil.copytree(bundled_dataset(), d)
+    doc = yaml.safe_load((d / "canes" / "b1c1.yaml").read_text())
+    doc["calipers"] = [{"height": 0.05, "diameter": 0.030}, {"height": 0.20, "diameter": 0.020},
+                       {"height": 0.30, "diameter": 0.0135}]
+    (d / "canes" / "b1c1.yaml").write_text(yaml.safe_dump(doc))
+    res = discover(load_dataset(d, "b1*,b2*"), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+                   candidates=("modulus_scale",), out=tmp_path / "out")
+    rows = {r["trial"]: r for r in json.loads((tmp_path / "out" / "discovery.json").read_text())["trials"]}
+    assert len(rows) == 18
+    for t in ("b1c1t1", "b1c1t2", "b1c1t3"):
+        assert not rows[t]["scored"] and "b1c1.yaml: field 'calipers': their line" in rows[t]["not_scored"], rows[t]
+    assert sum(r["scored"] for r in rows.values()) == 15
+    assert any(n.startswith("3 of 18 trials not scored: ") for n in res.notes)
+
+
+def test_a_fit_at_the_end_of_a_physical_range_is_not_named():
+    """A modulus five times the stated one (the scale's upper bound), a root or a rig at its softest,
+    a pitch of 45 degrees: the effect is pressed against the end of what it can physically be, so it
+    takes what it can of something else and is not named (``edge``); the bound on the null's side (a
+    spring at its stiffest) and a flare's excess at its 25 mm search bound (excess and length trade
+    off: true flares are fitted there) are not such ends."""
+    from canebench.discovery.checks_text import failure_reasons
+    from canebench.discovery.verdict import at_physical_edge
+    from canebench.model.effects import EffectSpec
+
+    def edge(text):
+        return [(e["effect"], e["parameter"]) for e in at_physical_edge((EffectSpec.parse(text),))]
+
+    assert edge("modulus_scale(scale=5)") == [("modulus_scale", "scale")]
+    assert edge("modulus_scale(scale=0.2)") == [("modulus_scale", "scale")]
+    assert edge("modulus_scale(scale=4.98)") == []
+    assert edge("root_compliance(k_root=0.3)") == [("root_compliance", "k_root")]
+    assert edge("root_compliance(k_root=3000)") == []  # its stiffest: the null's side
+    assert edge("rig_compliance(k_rig=20)") == [("rig_compliance", "k_rig")]
+    assert edge("rig_compliance(k_rig=100000)") == []
+    assert edge("probe_misalignment(angle_deg=-45)") == [("probe_misalignment", "angle_deg")]
+    assert edge("base_flare(excess_mm=25, length_mm=20)") == []
+    at = at_physical_edge((EffectSpec.parse("modulus_scale(scale=5)"), EffectSpec.parse("root_compliance(k_root=440)")))
+    assert failure_reasons({"failed": ["edge"], "at_edge": at, "alpha": 0.002}) == [
+        "needs modulus_scale scale = 5 (its physical range 0.2 to 5), at the end of the range: the effect takes what "
+        "it can of something it cannot be"]
+
+
+def test_discover_withholds_a_modulus_scale_pressed_against_its_bound(tmp_path):
+    """The bundled canes with their stated modulus written ten times too low: the data ask for a scale
+    of 10, beyond the physical range's 5. The scale fitted at 5 is reported as partial, not named,
+    and the result is flagged unexplained, with the reason in the notes."""
+    import shutil
+
+    import yaml
+
+    from canebench.data.dataset import bundled_dataset, load_dataset
+    from canebench.discovery.workflow import discover
+    from canebench.execute.executors import make_executor
+
+    d = tmp_path / "data"
+    shutil.copytree(bundled_dataset(), d)
+    for f in (d / "canes").glob("*.yaml"):
+        doc = yaml.safe_load(f.read_text())
+        doc.setdefault("material", {})["flexural_modulus"] = 4.57e8
+        f.write_text(yaml.safe_dump(doc))
+    res = discover(load_dataset(d, "b1*,b2*"), confirm=False, executor=make_executor("serial", 1, None), n_boot=10,
+                   candidates=("modulus_scale",))
+    assert res.named == [] and res.unexplained
+    (p,) = res.partial
+    assert p["effect"] == "modulus_scale" and p["params"]["scale"] == pytest.approx(5.0, rel=1e-6)
+    assert res.adequacy["failed"][0] == "edge"
+    assert any("needs modulus_scale scale = 5 (its physical range 0.2 to 5)" in n for n in res.notes)
