@@ -63,7 +63,10 @@
    (:func:`.shape.shape_check`, on one more run of the baseline engine with the fitted model),
    and a model whose traces bend less, or more, than the field's, on average over the canes,
    beyond an allowance (:func:`.shape.shape_level`: a creeping material, a probe that slides;
-   with nothing fitted it is run on the baseline's traces and flags without names to withhold).
+   with nothing fitted it is run on the baseline's traces and flags without names to withhold),
+   and a model that needs a parameter at the end of its physical range, away from its null
+   (:func:`.verdict.at_physical_edge`: a modulus five times the stated one takes what it can of
+   something no modulus is).
    Two warnings also set ``unexplained`` and leave the names
    standing: the structure table (:func:`.structure.structure_tests`) showing
    something significant, and the same level trend against a plain cane
