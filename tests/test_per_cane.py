@@ -134,6 +134,28 @@ def test_the_quadrature_holds_with_a_calipers_penalty_and_past_the_grids_ends():
     assert h.nll(theta) == pytest.approx(want, rel=1e-9, abs=1e-9)
 
 
+def _eighteen_canes(slopes):
+    """18 canes of three pushes with ``slopes`` (the prediction's d ln k / d ln v at each push) and
+    random offsets: canes, each trial's cane index, a, b (for :func:`_linear_hierarchy`)."""
+    canes = np.repeat([f"c{i:02d}" for i in range(18)], 3)
+    return canes, np.unique(canes, return_inverse=True)[1], np.tile(slopes, 18)
+
+
+def _draw_and_fit(rng, canes, inv, a, b, mu, omega, s2, t2):
+    """One dataset from the hierarchy (each cane's ln v, level and the trial noise), its linear
+    hierarchy, and the maximum-likelihood parameters (per_cane_test's own two-stage fit)."""
+    from canebench.discovery import per_cane as pc
+
+    C, n = len(np.unique(canes)), len(canes)
+    y = (a + b * (mu + omega * rng.normal(size=C))[inv] + rng.normal(0.0, math.sqrt(t2), C)[inv]
+         + rng.normal(0.0, math.sqrt(s2), n))
+    h = _linear_hierarchy(a, b, y, canes, np.zeros((n, n)))
+    base = np.array([mu, -np.inf, math.log(s2), math.log(t2)])
+    x0, _ = pc._fit(h, [base, base + np.array([0.0, 0.0, -1.0, 0.0])], free_omega=False)
+    x1, _ = pc._fit(h, [np.array([x0[0], math.log(o), x0[2], x0[3]]) for o in (0.15, 0.5, 1.2)], free_omega=True)
+    return y, h, x1
+
+
 def test_the_spreads_sampling_covariance_matches_its_scatter_over_repeated_datasets():
     """:func:`sampling_cov` (the inverse observed information, the (mu, ln omega) block) against the
     scatter of the fitted mu and ln omega over 40 datasets drawn from one hierarchy (18 canes, three
@@ -149,21 +171,12 @@ def test_the_spreads_sampling_covariance_matches_its_scatter_over_repeated_datas
     from canebench.discovery import per_cane as pc
 
     rng = np.random.default_rng(7)
-    C = 18
-    canes = np.repeat([f"c{i:02d}" for i in range(C)], 3)
-    inv = np.unique(canes, return_inverse=True)[1]
-    n = len(canes)
-    b = np.tile([-0.8, -0.55, -0.3], C)
-    a = rng.normal(0.0, 0.3, n)
+    canes, inv, b = _eighteen_canes([-0.8, -0.55, -0.3])
+    a = rng.normal(0.0, 0.3, len(canes))
     mu, omega, s2, t2 = math.log(50.0), 0.6, 0.05**2, 0.15**2
     est, se, cover = [], [], 0
     for _ in range(40):
-        y = (a + b * (mu + omega * rng.normal(size=C))[inv] + rng.normal(0.0, math.sqrt(t2), C)[inv]
-             + rng.normal(0.0, math.sqrt(s2), n))
-        h = _linear_hierarchy(a, b, y, canes, np.zeros((n, n)))
-        base = np.array([mu, -np.inf, math.log(s2), math.log(t2)])
-        x0, _ = pc._fit(h, [base, base + np.array([0.0, 0.0, -1.0, 0.0])], free_omega=False)
-        x1, _ = pc._fit(h, [np.array([x0[0], math.log(o), x0[2], x0[3]]) for o in (0.15, 0.5, 1.2)], free_omega=True)
+        _, h, x1 = _draw_and_fit(rng, canes, inv, a, b, mu, omega, s2, t2)
         V = np.array(pc.sampling_cov(h, x1))
         assert V.shape == (2, 2) and np.all(np.linalg.eigvalsh(V) > 0)
         est.append(x1[:2])
@@ -191,19 +204,10 @@ def test_the_spreads_sampling_covariance_is_the_inverse_information_where_a_cane
     from canebench.discovery import per_cane as pc
 
     rng = np.random.default_rng(11)
+    canes, inv, b = _eighteen_canes([-0.35, -0.3, -0.25])
+    a = rng.normal(0.0, 0.3, len(canes))
+    y, h, x1 = _draw_and_fit(rng, canes, inv, a, b, math.log(50.0), 0.9, 0.05**2, 0.1**2)
     C = 18
-    canes = np.repeat([f"c{i:02d}" for i in range(C)], 3)
-    inv = np.unique(canes, return_inverse=True)[1]
-    n = len(canes)
-    b = np.tile([-0.35, -0.3, -0.25], C)
-    a = rng.normal(0.0, 0.3, n)
-    mu, omega, s2, t2 = math.log(50.0), 0.9, 0.05**2, 0.1**2
-    y = (a + b * (mu + omega * rng.normal(size=C))[inv] + rng.normal(0.0, math.sqrt(t2), C)[inv]
-         + rng.normal(0.0, math.sqrt(s2), n))
-    h = _linear_hierarchy(a, b, y, canes, np.zeros((n, n)))
-    base = np.array([mu, -np.inf, math.log(s2), math.log(t2)])
-    x0, _ = pc._fit(h, [base, base + np.array([0.0, 0.0, -1.0, 0.0])], free_omega=False)
-    x1, _ = pc._fit(h, [np.array([x0[0], math.log(o), x0[2], x0[3]]) for o in (0.15, 0.5, 1.2)], free_omega=True)
 
     def nll(th):
         m, w, v, u = th[0], math.exp(th[1]), math.exp(th[2]), math.exp(th[3])
