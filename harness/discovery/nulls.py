@@ -35,6 +35,22 @@ def null_bound(p: Any) -> float:
     return math.nan
 
 
+def bounds_reached(spec: EffectSpec) -> list[tuple[str, float, bool]]:
+    """The parameters of ``spec`` fitted at a search bound: ``(parameter, value, at_null)``, where
+    ``at_null`` says the bound is the one at which the parameter does nothing (:func:`null_bound`)."""
+    pars = EFFECTS[spec.name].parameters
+    out = []
+    for k, v in spec.params:
+        par = pars.get(k)
+        if par is None:
+            continue
+        nb = null_bound(par)
+        for b in (par.low, par.high):
+            if at_bound(v, b):
+                out.append((k, float(v), bool(math.isfinite(nb) and at_bound(b, nb))))
+    return out
+
+
 def covers_null(spec: EffectSpec, ci: Intervals) -> list[str]:
     """The parameters of ``spec`` that switch the effect off and whose interval in ``ci`` reaches
     their null: the value itself where it lies within the search bounds, else the bound on its

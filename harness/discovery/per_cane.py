@@ -43,7 +43,8 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize
 from scipy.special import logsumexp
 
-from ..model.effects import COV_LN_MAX, EFFECTS, AppliedEffects, EffectSpec, Parameter, Spread
+from ..errors import InputError
+from ..model.effects import EFFECTS, AppliedEffects, EffectSpec, Parameter, Spread, check_cov_ln
 from .adequacy import geometry_draws
 from .fit import SIGMA_FLOOR
 from .screenset import Anchored
@@ -136,13 +137,15 @@ class PerCaneTest:
                           ((self.parameter, Spread(self.median, self.ln_sd, self.drawable_cov())),))
 
     def drawable_cov(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
-        """``cov_ln`` where a population may draw within it (variances within
-        :data:`~canebench.model.effects.COV_LN_MAX`), else None: a spread known worse than that is
+        """``cov_ln`` where a population may draw within it (:func:`~canebench.model.effects.check_cov_ln`:
+        variances within :data:`~canebench.model.effects.COV_LN_MAX`), else None: a spread known worse than that is
         drawn from its point estimate, and discovery's note says so."""
         if self.cov_ln is None:
             return None
-        (a, _), (_, c) = self.cov_ln
-        return self.cov_ln if a <= COV_LN_MAX[0] and c <= COV_LN_MAX[1] else None
+        try:  # the model file's own rule, so that discovery never writes a file its loader refuses
+            return check_cov_ln(self.cov_ln, "per-cane test", "cov_ln")
+        except InputError:
+            return None
 
 
 def varying_parameter(name: str) -> str | None:

@@ -392,9 +392,12 @@ def _per_cane_summary(df: pd.DataFrame) -> dict[str, Any]:
                          "per_cane_sets_named_root": f"{int(df.correct.sum())}/{len(df)}",
                          "per_cane_sets_found_per_cane": f"{int(_col(df, 'per_cane_found', False).sum())}/{len(df)}"}
     # each score's worst: r the lowest, errors the highest, the spread's ratio the farthest from 1 in ln
+    def farthest_from_0(v: np.ndarray) -> int:
+        return int(np.argmax(np.abs(v)))
+
     worst = {"per_cane_r": np.argmin, "per_cane_rms_ln": np.argmax, "per_cane_err_k_root": np.argmax,
-             "per_cane_ln_sd_ratio": lambda v: np.argmax(np.abs(np.log(v))),
-             "per_cane_ln_median_z": lambda v: np.argmax(np.abs(v)), "per_cane_ln_sd_z": lambda v: np.argmax(np.abs(v))}
+             "per_cane_ln_sd_ratio": lambda v: farthest_from_0(np.log(v)),
+             "per_cane_ln_median_z": farthest_from_0, "per_cane_ln_sd_z": farthest_from_0}
     for c, pick in worst.items():
         v = df[c].dropna().to_numpy(float) if c in df else np.zeros(0)
         s[f"{c}_median"] = float(np.median(v)) if len(v) else math.nan

@@ -20,7 +20,7 @@ from ..model.effects import EFFECTS
 from .adequacy import geometry_draws, level_trend_geometry, within_dispersion, within_trend_geometry
 from .checks_text import failure_reasons, fitted_entry
 from .fit import Candidate, cross_validate
-from .nulls import at_bound, null_bound
+from .nulls import bounds_reached
 from .screenset import Anchored
 from .structure import level_trend, structure_flags, structure_tests
 
@@ -206,15 +206,10 @@ def at_physical_edge(specs: tuple[Any, ...]) -> list[dict[str, Any]]:
     out = []
     for spec in specs:
         pars = EFFECTS[spec.name].parameters
-        for k, v in spec.params:
-            par = pars.get(k)
-            if par is None or not par.physical_bounds:
-                continue
-            nb = null_bound(par)
-            for b in (par.low, par.high):
-                if at_bound(v, b) and not (math.isfinite(nb) and at_bound(b, nb)):
-                    out.append({"effect": spec.name, "parameter": k, "value": float(v), "unit": par.unit,
-                                "low": par.low, "high": par.high})
+        for k, v, at_null in bounds_reached(spec):
+            if pars[k].physical_bounds and not at_null:
+                out.append({"effect": spec.name, "parameter": k, "value": v, "unit": pars[k].unit,
+                            "low": pars[k].low, "high": pars[k].high})
     return out
 
 
@@ -265,9 +260,9 @@ def within_taken_by(others: tuple[str, ...], current: tuple[str, ...], at: Ancho
         cv = cross_validate(Candidate.of(current + (c,)), at, lkf)
         spec = next(s for s in cv.fit.specs if s.name == c)
         row: dict[str, Any] = {"effect": c, "params": dict(spec.params), "r": math.nan, "p": math.nan}
-        par = EFFECTS[c].parameters
-        row["at_bound"] = [k for k, v in spec.params if at_bound(v, par[k].low) or at_bound(v, par[k].high)]
-        idle = [k for k in row["at_bound"] if at_bound(row["params"][k], null_bound(par[k]))]
+        hits = bounds_reached(spec)
+        row["at_bound"] = [k for k, _, _ in hits]
+        idle = [k for k, _, at_null in hits if at_null]
         if idle:
             row["why_not"] = f"does nothing: {', '.join(idle)} at its bound beside the null"
         else:

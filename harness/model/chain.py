@@ -252,10 +252,11 @@ def build_chain(cane: CaneDescription, push_id: str, config: ModelConfig | None 
     # cane of thread has no stiffness worth reporting (beyond the push, toward the tip, the floor only
     # trims the weight of a line that ends before the cane does: a warning below)
     for s_end in (0.0, s_push):  # a line's lowest value on [0, s_push] is at an end
-        if fit(s_end) < config.min_diameter_m:
+        d_end = float(fit(s_end))
+        if d_end < config.min_diameter_m:
             where = ", ".join(f"{v:.3f}" for v in cal_s)
             raise InputError(src, "calipers", f"their line (least squares, diameter factor {fit.factor:g}) reaches "
-                             f"{1e3 * float(fit(s_end)):.1f} mm at s = {s_end:.3f} m, below the "
+                             f"{1e3 * d_end:.1f} mm at s = {s_end:.3f} m, below the "
                              f"{1e3 * config.min_diameter_m:g} mm floor between the base and push point {pp.id} "
                              f"(s = {s_push:.3f} m): calipers at s = {where} m do not describe the cane there; "
                              f"measure it nearer the push points")
