@@ -434,7 +434,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     fitted = tuple(final.fit.specs)
     # -- per-cane scope of the named effects that may be each cane's own (a root, a collar)
     t_pc = time.perf_counter()
-    per_cane = scope_per_cane(named, final.fit, at, lkf, min_change, cfg0.diameter_factor, seed)
+    per_cane = scope_per_cane(named, final.fit, at, lkf, min_change, cfg0.diameter_factor, seed,
+                              plants=dict(zip(feats.cane, feats.bush)))
     if per_cane:
         notes.append(per_cane_note(per_cane))
     timing["per_cane_s"] = time.perf_counter() - t_pc
@@ -559,15 +560,17 @@ def _named_entries(specs: Iterable[EffectSpec], ci: dict, at: Anchored) -> list[
 
 def scope_per_cane(named: list[dict[str, Any]], fit: Any, at: Anchored, log_k_field: np.ndarray,
                    min_change: float, diameter_factor: float, seed: int,
-                   alpha: float = PER_CANE_ALPHA) -> dict[str, PerCaneTest]:
+                   alpha: float = PER_CANE_ALPHA,
+                   plants: Mapping[str, Any] | None = None) -> dict[str, PerCaneTest]:
     """Test each named effect that may be each cane's own for a value per cane (:mod:`.per_cane`),
     at ``alpha`` split over the effects tested; a per-cane one gets ``scope`` ``per_cane`` and its
-    canes' values (``local``) in place. Every tested entry carries ``per_cane_test``."""
+    canes' values (``local``) in place. Every tested entry carries ``per_cane_test``. ``plants``
+    (cane -> bush) clusters the spread's error by plant."""
     tested = [n for n in named if n["scope"] == "global" and varying_parameter(n["effect"])]
     out: dict[str, PerCaneTest] = {}
     for n in tested:
         t = per_cane_test(at, log_k_field, tuple(fit.specs), n["effect"], alpha / len(tested), min_change,
-                          diameter_factor, fit.s2, fit.t2, seed)
+                          diameter_factor, fit.s2, fit.t2, seed, plants)
         if t is None:
             continue
         # kept global, the canes' values (shrunk toward the median) say nothing a reader needs
@@ -601,7 +604,17 @@ def _spread_error_text(t: PerCaneTest) -> str:
     if t.drawable_cov() is None:
         return (f"; their standard errors ({se[0]:.2f} in ln median, {se[1]:.2f} in ln ln sd) are too large to draw "
                 f"within, so a population draws from them as if exact")
-    return f", each first drawn within its sampling error (standard errors {se[0]:.2f} in ln median, {se[1]:.2f} in ln ln sd)"
+    return (f", each first drawn within its sampling error (standard errors {se[0]:.2f} in ln median, {se[1]:.2f} in "
+            f"ln ln sd{_clustered_text(t)})")
+
+
+def _clustered_text(t: PerCaneTest) -> str:
+    """Where the error clustered by plant widened the information's, by how much."""
+    if t.cov_ln_model is None or t.cov_ln == t.cov_ln_model:
+        return ""
+    m = (math.sqrt(t.cov_ln_model[0][0]), math.sqrt(t.cov_ln_model[1][1]))
+    return (f"; clustered by plant over {t.n_plants} plants, wider than the {m[0]:.2f} and {m[1]:.2f} the canes "
+            f"give taken as independent")
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:
