@@ -252,11 +252,13 @@ def test_the_spreads_error_clustered_by_plant_is_the_sandwich_of_the_plants_summ
     (exact where the prediction is linear in ln v), by another scheme (steps 2e-3): the information H
     from central differences of central-difference gradients, each cane's score from central
     differences of its own log density, B = G / (G - 1) sum over plants of the outer product of the
-    plant's summed scores, H^-1 B H^-1's (mu, ln omega) block; each element within 1e-3 of the largest
+    plant's summed scores (centred), H^-1 B H^-1's (mu, ln omega) block times (t_5 / z)^2 for six plants'
+    five degrees of freedom; each element within 1e-3 of the largest
     (the module's steps of 1e-2 err by about their square). Six plants of three canes whose values are
     their plant's. Then :func:`wider_of`: each standard error the larger of the two, the information's
     correlation kept; and the cases without a clustered error (fewer than four plants; a plant list
     that does not fit the canes is an error)."""
+    from scipy import stats
     from scipy.stats import multivariate_normal
 
     from canebench.discovery import per_cane as pc
@@ -286,8 +288,10 @@ def test_the_spreads_error_clustered_by_plant_is_the_sandwich_of_the_plants_summ
     H = 0.5 * (H + H.T)
     g = scores(x1)
     per_plant = np.array([g[plant == k].sum(axis=0) for k in range(6)])
+    per_plant -= per_plant.mean(axis=0)
     Hinv = np.linalg.inv(H)
-    want = (Hinv @ (6 / 5 * per_plant.T @ per_plant) @ Hinv)[:2, :2]
+    t5 = (stats.t.ppf(0.975, 5) / stats.norm.ppf(0.975)) ** 2  # 2.5706 / 1.9600, squared
+    want = t5 * (Hinv @ (6 / 5 * per_plant.T @ per_plant) @ Hinv)[:2, :2]
     got = np.array(pc.clustered_cov(h, x1, plant))
     assert np.all(np.abs(got - want) <= 1e-3 * np.abs(want).max()), (got, want)
     # the canes share their plant's value: the information, which takes them as independent, is too small
@@ -303,29 +307,32 @@ def test_the_spreads_error_clustered_by_plant_is_the_sandwich_of_the_plants_summ
 
 
 @pytest.mark.heavy
-def test_the_spreads_error_holds_where_a_plants_canes_share_their_value():
-    """Over 40 datasets of 12 plants of three canes whose values are their plant's, the fitted mu and
-    ln omega scatter about twice as much as the information's error says (it takes the 36 canes as 36
-    independent values; with 12 it is short by about sqrt(3)); the error the test reports
-    (:func:`wider_of`: the information's, widened to the one clustered by plant) must match the scatter:
-    each ratio of scatter to median error in [0.7, 1.45] (the scatter's own error is 11 % at 40; the
-    sandwich is asymptotic in the plants and about 10-30 % low at 12 in development, two seeds of 40:
-    1.18/1.15 and 0.87/1.32), and each information ratio above 1.45 (development: 2.09/1.66 and
-    1.53/1.65). On independent canes (each its own draw) the widened error must still match (development:
-    1.03/1.15). About 70 s."""
+def test_the_spreads_error_holds_where_a_plants_canes_share_their_value(seed=9):
+    """Over 60 datasets of 12 plants of four canes whose values are their plant's, the fitted mu and
+    ln omega scatter about twice as much as the information's error says (it takes the 48 canes as 48
+    independent values; they are 12). The error the test reports (:func:`wider_of`: the information's,
+    widened to the one clustered by plant, with its small-sample scaling) must match the scatter:
+    each ratio of scatter to median error in [0.6, 1.5], and each information ratio above 1.6. On
+    independent canes (each its own draw) the widened error must still match. The sd of 60 estimates
+    is itself uncertain by 1 / sqrt(118) = 9 %; in development (this test's code, seeds 9 and 3) the
+    widened ratios were 0.99 and 0.98 for mu and 1.15 for ln omega (a sandwich's variance of a variance
+    runs low at a few plants), the information's 2.27/2.09 and 2.23/2.10, and on independent canes
+    0.92/1.10 and 0.82/1.19. About 100 s alone."""
     from canebench.discovery import per_cane as pc
 
-    rng = np.random.default_rng(9)
-    canes = np.repeat([f"c{i:02d}" for i in range(36)], 3)
+    rng = np.random.default_rng(seed)
+    P, per = 12, 4
+    C = P * per
+    canes = np.repeat([f"c{i:02d}" for i in range(C)], 3)
     inv = np.unique(canes, return_inverse=True)[1]
-    b = np.tile([-0.8, -0.55, -0.3], 36)
+    b = np.tile([-0.8, -0.55, -0.3], C)
     a = rng.normal(0.0, 0.3, len(canes))
-    plant = np.arange(36) // 3
+    plant = np.arange(C) // per
     mu, omega, s2, t2 = math.log(50.0), 0.6, 0.05**2, 0.15**2
     ratios = {}
-    for case, of in (("shared", plant), ("independent", np.arange(36))):
+    for case, of in (("shared", plant), ("independent", np.arange(C))):
         est, se_model, se_wide = [], [], []
-        for _ in range(40):
+        for _ in range(60):
             y = _draw_by_plant(rng, of, a, b, inv, mu, omega, s2, t2)
             h = _linear_hierarchy(a, b, y, canes, np.zeros((len(y), len(y))))
             x1 = _fit_linear(h, mu, s2, t2)
@@ -335,9 +342,9 @@ def test_the_spreads_error_holds_where_a_plants_canes_share_their_value():
             se_wide.append(np.sqrt(np.diag(pc.wider_of(model, pc.clustered_cov(h, x1, plant)))))
         sd = np.array(est).std(axis=0, ddof=1)
         ratios[case] = (sd / np.median(se_model, axis=0), sd / np.median(se_wide, axis=0))
-    assert np.all((ratios["shared"][1] > 0.7) & (ratios["shared"][1] < 1.45)), ratios
-    assert np.all(ratios["shared"][0] > 1.45), ratios
-    assert np.all((ratios["independent"][1] > 0.7) & (ratios["independent"][1] < 1.45)), ratios
+    assert np.all((ratios["shared"][1] > 0.6) & (ratios["shared"][1] < 1.5)), ratios
+    assert np.all(ratios["shared"][0] > 1.6), ratios
+    assert np.all((ratios["independent"][1] > 0.6) & (ratios["independent"][1] < 1.5)), ratios
 
 
 def _simulate(at, rng, k_med, ln_sd):
@@ -363,6 +370,37 @@ def _test(at, y):
 
     fit = fit_candidate(Candidate.of(("root_compliance",)), at, y)
     return per_cane_test(at, y, fit.specs, "root_compliance", PER_CANE_ALPHA, 0.05, s2=fit.s2, t2=fit.t2)
+
+
+def test_the_per_cane_test_clusters_the_spreads_error_over_the_plants_it_is_given(bundled_screen):
+    """``per_cane_test`` with each cane's plant (the bundled canes' bushes: six of three canes): it records
+    the number of plants, the information's and the clustered covariances, and reports the wider of
+    them (:func:`wider_of`), in its dict too; without plants, or with a plant map that misses a cane, the
+    information's alone. The fit itself does not depend on the plants."""
+    from canebench.discovery import per_cane as pc
+    from canebench.discovery.fit import Candidate, fit_candidate
+
+    y, _ = _simulate(bundled_screen, np.random.default_rng(5), 20.0, 0.7)
+    fit = fit_candidate(Candidate.of(("root_compliance",)), bundled_screen, y)
+    canes = sorted(set(bundled_screen.screen.canes))
+    plants = {c: c.split("c")[0] for c in canes}
+    assert len(set(plants.values())) == 6
+
+    def run(pl):
+        return pc.per_cane_test(bundled_screen, y, fit.specs, "root_compliance", pc.PER_CANE_ALPHA, 0.05,
+                                s2=fit.s2, t2=fit.t2, plants=pl)
+
+    t, t0 = run(plants), run(None)
+    assert t.ln_sd > 0 and t.n_plants == 6 and t.cov_ln_plants is not None
+    assert t.cov_ln == pc.wider_of(t.cov_ln_model, t.cov_ln_plants) and t.cov_ln_model == t0.cov_ln_model
+    assert (t.median, t.ln_sd, t.lr, t.values) == (t0.median, t0.ln_sd, t0.lr, t0.values)
+    assert t0.n_plants is None and t0.cov_ln_plants is None and t0.cov_ln == t0.cov_ln_model
+    d = json.loads(json.dumps(t.to_dict()))
+    assert d["n_plants"] == 6 and d["cov_ln_information"] == [list(r) for r in t.cov_ln_model]
+    assert d["cov_ln_clustered_by_plant"] == [list(r) for r in t.cov_ln_plants]
+    assert d["cov_ln_median_ln_sd"] == [list(r) for r in t.cov_ln]
+    missing = run({c: p for c, p in plants.items() if c != canes[0]})
+    assert missing.n_plants is None and missing.cov_ln == t0.cov_ln
 
 
 def test_a_global_root_stays_global_and_a_root_per_cane_is_found_with_each_canes_value(bundled_screen):
@@ -491,12 +529,28 @@ def test_the_scope_is_worded_for_the_cli_and_the_report():
         "(between_canes), each first drawn within its sampling error (standard errors 0.07 in ln median, "
         "0.25 in ln ln sd)")
     assert t.spec(EffectSpec.parse("root_compliance(k_root=20)")).between[0][1].cov_ln == t.cov_ln
-    # a spread known worse than the model file allows (ln ln sd's standard error 0.6 > 0.5) is drawn as if exact
-    t.cov_ln = ((0.0049, 0.0), (0.0, 0.36))
+    # a spread known worse than the model file allows (ln ln sd's standard error 0.6 > 0.5) is drawn within
+    # the most it allows (its variance cut to 0.25, the correlation kept), never as if exact
+    t.cov_ln = ((0.0049, 0.021), (0.021, 0.36))
     assert per_cane_note({"root_compliance": t}).endswith(
-        "their standard errors (0.07 in ln median, 0.60 in ln ln sd) are too large to draw within, so a "
-        "population draws from them as if exact")
-    assert t.spec(EffectSpec.parse("root_compliance(k_root=20)")).between[0][1].cov_ln is None
+        "(standard errors 0.07 in ln median, 0.60 in ln ln sd; a population draws within 0.07 and 0.50, the most it "
+        "allows, as its spread can overflow beyond)")
+    cut = t.spec(EffectSpec.parse("root_compliance(k_root=20)")).between[0][1].cov_ln
+    assert cut[1][1] == 0.25 and cut[0][0] == 0.0049
+    assert cut[0][1] / math.sqrt(cut[0][0] * cut[1][1]) == pytest.approx(0.021 / math.sqrt(0.0049 * 0.36), rel=1e-12)
+    t.cov_ln = ((4.0, 0.0), (0.0, 1.0))  # both cut
+    assert t.drawable_cov() == ((1.0, 0.0), (0.0, 0.25))
+    t.cov_ln = ((float("nan"), 0.0), (0.0, 0.01))  # not a covariance: none, and the note says so
+    assert t.drawable_cov() is None and "not a covariance a population can draw within" in per_cane_note(
+        {"root_compliance": t})
+    # the clustering by plant: the note names only the error it widened, and from what
+    t.cov_ln_model, t.n_plants = ((0.0225, 0.001), (0.001, 0.0289)), 6
+    t.cov_ln = ((0.0484, 0.0015), (0.0015, 0.0289))
+    assert per_cane_note({"root_compliance": t}).endswith(
+        "(standard errors 0.22 in ln median, 0.17 in ln ln sd; clustered by plant over 6 plants, which widened "
+        "ln median from 0.15)")
+    t.cov_ln = ((0.0484, 0.002), (0.002, 0.04))
+    assert "which widened ln median from 0.15 and ln ln sd from 0.17)" in per_cane_note({"root_compliance": t})
 
 
 @pytest.mark.heavy
@@ -510,6 +564,7 @@ def test_discover_gives_each_cane_its_own_root_where_the_generator_hides_one_per
     from canebench.data.dataset import load_dataset
     from canebench.discovery.workflow import discover
     from canebench.execute.executors import make_executor
+    from canebench.model.effects import COV_LN_MAX
     from canebench.model.modelfile import load_model_file
 
     out = {}
@@ -529,8 +584,17 @@ def test_discover_gives_each_cane_its_own_root_where_the_generator_hides_one_per
     (e,) = [s for s in cfg.effects if s.name == "root_compliance"]
     assert e.scope == "per_cane" and set(dict(e.local)) == set(c)
     pct = root["per_cane_test"]
-    assert e.between == (("k_root", (pytest.approx(pct["median"]), pytest.approx(pct["ln_sd_between_canes"]),
-                                      tuple(map(tuple, pct["cov_ln_median_ln_sd"])))),)
+    ((name, spread),) = e.between
+    assert name == "k_root" and spread.median == pytest.approx(pct["median"])
+    assert spread.ln_sd == pytest.approx(pct["ln_sd_between_canes"])
+    # the model file's covariance is the reported one, each variance cut to what a population draws within
+    cov = np.array(pct["cov_ln_median_ln_sd"])
+    assert np.diag(np.array(spread.cov_ln)) == pytest.approx(np.minimum(np.diag(cov), COV_LN_MAX), rel=1e-12)
+    # the workflow passed each cane's bush: the error clustered over the dataset's plants, the reported one
+    # the wider of it and the information's
+    assert pct["n_plants"] == len({k.split("c")[0] for k in c}) >= 4
+    info, clus = np.array(pct["cov_ln_information"]), np.array(pct["cov_ln_clustered_by_plant"])
+    assert np.diag(cov) == pytest.approx(np.maximum(np.diag(info), np.diag(clus)), rel=1e-9)
     # with the spread's sampling covariance: a standard error of ln omega near 1 / sqrt(2 (C - 1)), its
     # value for C canes' exact values (0.17 at 18); noisier pushes make it larger, not under half of it
     se_ln_sd = math.sqrt(pct["cov_ln_median_ln_sd"][1][1])

@@ -596,25 +596,36 @@ def per_cane_note(per_cane: Mapping[str, PerCaneTest]) -> str:
 
 
 def _spread_error_text(t: PerCaneTest) -> str:
-    """How a population treats the spread's own error: drawn within it (its standard errors), or why not."""
+    """How a population treats the spread's own error: drawn within it (its standard errors, where the
+    clustering by plant widened them, and where they were cut to what a population draws within), or why not."""
     if t.cov_ln is None:
         return ("; their sampling error is not known (the hierarchy's information is not positive definite: the "
                 "spread is not pinned apart from the canes' own levels), so a population draws from them as if exact")
-    se = (math.sqrt(t.cov_ln[0][0]), math.sqrt(t.cov_ln[1][1]))
-    if t.drawable_cov() is None:
-        return (f"; their standard errors ({se[0]:.2f} in ln median, {se[1]:.2f} in ln ln sd) are too large to draw "
-                f"within, so a population draws from them as if exact")
-    return (f", each first drawn within its sampling error (standard errors {se[0]:.2f} in ln median, {se[1]:.2f} in "
-            f"ln ln sd{_clustered_text(t)})")
+    se = _se(t.cov_ln)
+    drawn = t.drawable_cov()
+    if drawn is None:
+        return (f"; their standard errors ({se[0]:.2f} in ln median, {se[1]:.2f} in ln ln sd) are not a covariance a "
+                f"population can draw within, so it draws from them as if exact")
+    text = (f", each first drawn within its sampling error (standard errors {se[0]:.2f} in ln median, {se[1]:.2f} in "
+            f"ln ln sd{_clustered_text(t)}")
+    if drawn != t.cov_ln:
+        cut = _se(drawn)
+        text += (f"; a population draws within {cut[0]:.2f} and {cut[1]:.2f}, the most it allows, as its spread can "
+                 f"overflow beyond")
+    return text + ")"
+
+
+def _se(cov: tuple[tuple[float, float], tuple[float, float]]) -> tuple[float, float]:
+    return math.sqrt(cov[0][0]), math.sqrt(cov[1][1])
 
 
 def _clustered_text(t: PerCaneTest) -> str:
-    """Where the error clustered by plant widened the information's, by how much."""
-    if t.cov_ln_model is None or t.cov_ln == t.cov_ln_model:
+    """Which standard errors the clustering by plant widened, and from what."""
+    if t.cov_ln_model is None or t.cov_ln is None:
         return ""
-    m = (math.sqrt(t.cov_ln_model[0][0]), math.sqrt(t.cov_ln_model[1][1]))
-    return (f"; clustered by plant over {t.n_plants} plants, wider than the {m[0]:.2f} and {m[1]:.2f} the canes "
-            f"give taken as independent")
+    names = ("ln median", "ln ln sd")
+    wide = [f"{names[i]} from {_se(t.cov_ln_model)[i]:.2f}" for i in (0, 1) if t.cov_ln[i][i] > t.cov_ln_model[i][i]]
+    return f"; clustered by plant over {t.n_plants} plants, which widened {' and '.join(wide)}" if wide else ""
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:
