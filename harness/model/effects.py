@@ -309,9 +309,9 @@ def _pairs(d: Mapping[str, Any]) -> _Pairs:
 #: collar spreads so; beyond it a log-normal draw overflows before it means anything)
 LN_SD_MAX = 5.0
 #: the largest sampling variances of (ln median, ln ln_sd) a model file may give: a median uncertain
-#: by a factor e, a spread by a factor e^0.5 = 1.65, at one standard error. A spread known worse than
-#: that is not one to draw new canes within (discovery then writes none, and says so), and beyond it
-#: a member's drawn spread can reach hundreds and its value overflow
+#: by a factor e, a spread by a factor e^0.5 = 1.65, at one standard error. Beyond it a member's drawn
+#: spread can reach hundreds and its value overflow, so discovery writes a spread known worse than that
+#: cut to these variances (its correlation kept), and says so (``PerCaneTest.drawable_cov``)
 COV_LN_MAX = (1.0, 0.25)
 
 
