@@ -317,7 +317,7 @@ def test_the_spreads_error_holds_where_a_plants_canes_share_their_value(seed=9):
     is itself uncertain by 1 / sqrt(118) = 9 %; in development (this test's code, seeds 9 and 3) the
     widened ratios were 0.99 and 0.98 for mu and 1.15 for ln omega (a sandwich's variance of a variance
     runs low at a few plants), the information's 2.27/2.09 and 2.23/2.10, and on independent canes
-    0.92/1.10 and 0.82/1.19. About 100 s alone."""
+    0.92/1.10 and 0.82/1.19. 143 s each with the two seeds run at once."""
     from canebench.discovery import per_cane as pc
 
     rng = np.random.default_rng(seed)
