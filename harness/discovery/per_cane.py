@@ -393,7 +393,12 @@ def sampling_cov(h: _Hierarchy, theta: np.ndarray, step: float = HESSIAN_STEP) -
     None where omega is 0 or the information is not positive definite: a spread the data do not pin
     apart from the canes' own levels has no standard error to give, and holding a variance to get one
     would give the error as if that variance were known."""
-    info = _information(h, theta, step)
+    return _inverse_block(_information(h, theta, step))
+
+
+def _inverse_block(info: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> Cov2 | None:
+    """The (mu, ln omega) block of the inverse information (:func:`sampling_cov`), from
+    :func:`_information`'s answer."""
     if info is None or not _positive_definite(info[0]):
         return None
     return _block(np.linalg.inv(info[0]))
@@ -423,11 +428,15 @@ def clustered_cov(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray,
     plants = np.asarray(plants)
     if len(plants) != len(h.uniq):
         raise ValueError(f"{len(plants)} plants given for {len(h.uniq)} canes")
-    groups, g_inv = np.unique(plants, return_inverse=True)
-    if len(groups) < MIN_PLANTS:
+    if len(np.unique(plants)) < MIN_PLANTS:
         return None
-    info = _information(h, theta, step)
-    if info is None or not _positive_definite(info[0]):
+    return _sandwich_block(_information(h, theta, step), plants)
+
+
+def _sandwich_block(info: tuple[np.ndarray, np.ndarray, np.ndarray] | None, plants: np.ndarray) -> Cov2 | None:
+    """:func:`clustered_cov`'s covariance from :func:`_information`'s answer and each cane's plant."""
+    groups, g_inv = np.unique(plants, return_inverse=True)
+    if len(groups) < MIN_PLANTS or info is None or not _positive_definite(info[0]):
         return None
     H, scores, _ = info
     per_plant = np.array([scores[g_inv == k].sum(axis=0) for k in range(len(groups))])
@@ -583,11 +592,12 @@ def per_cane_test(at: Anchored, log_k_field: np.ndarray, specs: tuple[EffectSpec
                   f"{spread:.3f} in mean |ln k|, under {min_change:.3g}: kept global")
     cov_model = cov_plants = n_plants = None
     if omega > 0:
-        cov_model = sampling_cov(h, x1)
+        info = _information(h, x1, HESSIAN_STEP)  # once, for both covariances
+        cov_model = _inverse_block(info)
         if plants is not None and all(c in plants for c in h.uniq):
             of = np.array([str(plants[c]) for c in h.uniq])
             n_plants = len(np.unique(of))
-            cov_plants = clustered_cov(h, x1, of)
+            cov_plants = _sandwich_block(info, of)
     return PerCaneTest(name, parameter, unit, math.exp(x1[0]), omega, lr, p, alpha, spread, per,
                        {str(c): float(math.exp(v)) for c, v in zip(h.uniq, m)},
                        {str(c): float(s) for c, s in zip(h.uniq, sd)}, reason,

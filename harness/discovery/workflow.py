@@ -111,7 +111,7 @@ from .checks_text import lookalike_notes
 from .contacts import FieldContacts, read_contacts
 from .fit import bootstrap_ci
 from .nulls import ci_of
-from .per_cane import PER_CANE_ALPHA, PerCaneTest, per_cane_test, varying_parameter
+from .per_cane import PER_CANE_ALPHA, Cov2, PerCaneTest, per_cane_test, varying_parameter
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, drop_unsupported, forward_select
 from .structure import between_share
@@ -615,7 +615,8 @@ def _spread_error_text(t: PerCaneTest) -> str:
     return text + ")"
 
 
-def _se(cov: tuple[tuple[float, float], tuple[float, float]]) -> tuple[float, float]:
+def _se(cov: Cov2) -> tuple[float, float]:
+    """The standard errors of (ln median, ln ln sd) in a spread's covariance."""
     return math.sqrt(cov[0][0]), math.sqrt(cov[1][1])
 
 
