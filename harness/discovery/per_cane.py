@@ -210,6 +210,9 @@ class _Hierarchy:
 
     def __init__(self, grid: np.ndarray, P: np.ndarray, pen: np.ndarray, y: np.ndarray, canes: np.ndarray,
                  G: np.ndarray):
+        # kept for :meth:`without`
+        self._given = (np.asarray(grid, float), np.asarray(P, float), np.asarray(pen, float),
+                       np.asarray(y, float), np.asarray(canes), np.asarray(G, float))
         self.grid = np.asarray(grid, float)
         self.Ps = CubicSpline(self.grid, np.asarray(P, float), axis=0)
         self.dPs = self.Ps.derivative()
@@ -225,6 +228,13 @@ class _Hierarchy:
             self.batches.append((ks, rows, G[rows[:, :, None], rows[:, None, :]]))
         self.x, self.w = np.polynomial.hermite.hermgauss(N_NODES)
         self._mode: np.ndarray | None = None  # the last modes: the next evaluation's start
+
+    def without(self, drop: np.ndarray) -> "_Hierarchy":
+        """The hierarchy of the canes not in ``drop`` ((canes,) bool, in the order of ``uniq``)."""
+        grid, P, pen, y, canes, G = self._given
+        keep = ~np.asarray(drop, bool)[self.inv]
+        return _Hierarchy(grid, P[:, keep], pen[:, ~np.asarray(drop, bool)], y[keep], canes[keep],
+                          G[np.ix_(keep, keep)])
 
     def _at(self, spline: CubicSpline, slope: CubicSpline, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """A table's values and slopes at ``u``; beyond the grid's ends it goes on straight, with the
@@ -338,37 +348,32 @@ class _Hierarchy:
 
 #: relative step (in each of mu, ln omega, ln s2, ln t2) of the observed information's central differences
 HESSIAN_STEP = 1e-2
-#: fewest plants a clustered error is taken from: the sandwich's middle is a sum over plants, and with
-#: fewer it is too noisy to widen anything by (at 4 it is already far low for ln omega: it can only widen)
+#: fewest plants a clustered error is taken from: the jackknife's spread is over the plants, and with
+#: fewer it is too noisy to widen anything by
 MIN_PLANTS = 4
 
 
-def _information(h: _Hierarchy, theta: np.ndarray,
-                 step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """The observed information over the free parameters at ``theta`` (central differences of
-    :meth:`_Hierarchy.nll`), each cane's score over them ((canes, p): central differences of its own
-    log likelihood), and which parameters are free. None where omega is 0 or a density on the stencil
-    is not finite. A variance within a step of its floor (s2 at :data:`SIGMA_FLOOR`, t2 at 0), where the
-    likelihood is flat on one side, is held there."""
+def _information(h: _Hierarchy, theta: np.ndarray, step: float) -> np.ndarray | None:
+    """The observed information over the free parameters at ``theta``: central differences of
+    :meth:`_Hierarchy.nll` over mu, ln omega and those of ln s2, ln t2 that are free. None where omega
+    is 0 or a density on the stencil is not finite. A variance within a step of its floor (s2 at
+    :data:`SIGMA_FLOOR`, t2 at 0), where the likelihood is flat on one side, is held there."""
     theta = np.asarray(theta, float)
     if not (np.all(np.isfinite(theta[:2])) and theta[1] > LOG_FLOOR):
         return None
     floors = {2: 2.0 * math.log(SIGMA_FLOOR), 3: LOG_FLOOR}
     free = [0, 1] + [i for i in (2, 3) if math.isfinite(theta[i]) and theta[i] - step > floors[i]]
-    memo: dict[tuple[tuple[int, int], ...], np.ndarray] = {}
+    memo: dict[tuple[tuple[int, int], ...], float] = {}
 
-    def ll(*moves: tuple[int, int]) -> np.ndarray:
-        """Each cane's log likelihood with the parameters moved by a step each."""
+    def f(*moves: tuple[int, int]) -> float:
+        """-ln L with the parameters moved by a step each."""
         key = tuple(sorted(moves))
         if key not in memo:
             t = theta.copy()
             for i, sgn in moves:
                 t[i] += sgn * step
-            memo[key] = h.cane_loglik(t)[0]
+            memo[key] = -float(np.sum(h.cane_loglik(t)[0]))
         return memo[key]
-
-    def f(*moves: tuple[int, int]) -> float:
-        return -float(np.sum(ll(*moves)))
 
     f0 = f()
     H = np.empty((len(free), len(free)))
@@ -378,10 +383,9 @@ def _information(h: _Hierarchy, theta: np.ndarray,
             j = free[b]
             H[a, b] = H[b, a] = (f((i, 1), (j, 1)) - f((i, 1), (j, -1)) - f((i, -1), (j, 1))
                                  + f((i, -1), (j, -1))) / (4.0 * step**2)
-    if not all(np.all(np.isfinite(v)) for v in memo.values()):
+    if not all(math.isfinite(v) for v in memo.values()):
         return None
-    scores = np.array([(ll((i, 1)) - ll((i, -1))) / (2.0 * step) for i in free]).T
-    return H, scores, np.array(free)
+    return H
 
 
 def sampling_cov(h: _Hierarchy, theta: np.ndarray, step: float = HESSIAN_STEP) -> Cov2 | None:
@@ -393,32 +397,30 @@ def sampling_cov(h: _Hierarchy, theta: np.ndarray, step: float = HESSIAN_STEP) -
     None where omega is 0 or the information is not positive definite: a spread the data do not pin
     apart from the canes' own levels has no standard error to give, and holding a variance to get one
     would give the error as if that variance were known."""
-    return _inverse_block(_information(h, theta, step))
-
-
-def _inverse_block(info: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> Cov2 | None:
-    """The (mu, ln omega) block of the inverse information (:func:`sampling_cov`), from
-    :func:`_information`'s answer."""
-    if info is None or not _positive_definite(info[0]):
+    H = _information(h, theta, step)
+    if H is None or not _positive_definite(H):
         return None
-    return _block(np.linalg.inv(info[0]))
+    return _block(np.linalg.inv(H))
 
 
-def clustered_cov(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray,
-                  step: float = HESSIAN_STEP) -> Cov2 | None:
+def clustered_cov(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray) -> Cov2 | None:
     """The sampling covariance of (mu, ln omega) with the canes of a plant not taken as independent:
-    the sandwich H^-1 B H^-1, B = G / (G - 1) sum over the G plants of the outer product of the plant's
-    summed cane scores (:func:`_information`; centred), scaled by (t_{G-1, 0.975} / z_0.975)^2.
+    the jackknife over plants. Each plant's canes are left out in turn and the hierarchy refitted
+    (from ``theta``); over the G estimates e_g of (mu, ln omega) the covariance is
+    (G - 1) / G sum_g (e_g - mean e)(e_g - mean e)^T, scaled by (t_{G-1, 0.975} / z_0.975)^2.
 
     The hierarchy draws each cane's value on its own; where the canes of a plant share theirs (a root
     is its crown's and its soil's as much as its cane's) it has fewer independent values than canes,
     and the information's error is too small by about the square root of the canes a plant. The
-    sandwich holds either way, but is an asymptotic answer in the number of plants: a Wald interval
-    from G plants has G - 1 degrees of freedom (hence the t scaling, 1.72 in variance at six plants),
-    and the sandwich's error of ln omega, a variance's variance, stays low even so: on 200 datasets of
-    6 plants of 3 canes sharing their values, scatter over median error 1.21 and coverage 83 % for
-    ln omega, 0.77 and 97 % for mu (docs/discovery.md, session 64). None with fewer than
-    :data:`MIN_PLANTS` plants or where the information is not positive definite.
+    jackknife holds either way. It replaced session 64's sandwich (the plants' summed scores about the
+    information), which is the jackknife's first-order form: where one plant's canes carry the spread,
+    leaving them out moves ln omega further than the curvature at the fit says, and the sandwich's
+    error of ln omega ran low (coverage 81 % on 6 plants of 3 canes sharing their values, against the
+    jackknife's 92 %; docs/discovery.md, session 65). A Wald interval from G plants has G - 1 degrees
+    of freedom, hence the t scaling (1.72 in variance at six plants). Where the spread rests on one
+    plant, leaving it out sends ln omega toward its floor and the error is as large as that says
+    (a population draws it cut to :data:`~canebench.model.effects.COV_LN_MAX`). None with fewer than
+    :data:`MIN_PLANTS` plants, at omega = 0, or where a refit is not finite.
 
     Parameters
     ----------
@@ -428,35 +430,30 @@ def clustered_cov(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray,
     plants = np.asarray(plants)
     if len(plants) != len(h.uniq):
         raise ValueError(f"{len(plants)} plants given for {len(h.uniq)} canes")
-    if len(np.unique(plants)) < MIN_PLANTS:
-        return None
-    return _sandwich_block(_information(h, theta, step), plants)
-
-
-def _sandwich_block(info: tuple[np.ndarray, np.ndarray, np.ndarray] | None, plants: np.ndarray) -> Cov2 | None:
-    """:func:`clustered_cov`'s covariance from :func:`_information`'s answer and each cane's plant."""
     groups, g_inv = np.unique(plants, return_inverse=True)
-    if len(groups) < MIN_PLANTS or info is None or not _positive_definite(info[0]):
+    theta = np.asarray(theta, float)
+    if len(groups) < MIN_PLANTS or not (np.all(np.isfinite(theta)) and theta[1] > LOG_FLOOR):
         return None
-    H, scores, _ = info
-    per_plant = np.array([scores[g_inv == k].sum(axis=0) for k in range(len(groups))])
-    # centred: the fit stops near the scores' zero, not on it, and an offset there is no spread
-    per_plant = per_plant - per_plant.mean(axis=0)
-    Hinv = np.linalg.inv(H)
+    est = []
+    for k in range(len(groups)):
+        x, _ = _fit(h.without(g_inv == k), [theta], free_omega=True)
+        if not np.all(np.isfinite(x[:2])):
+            return None
+        est.append(x[:2])
     G = len(groups)
+    e = np.array(est) - np.mean(est, axis=0)
     # a Wald interval from G plants has G - 1 degrees of freedom: scaled by (t_{G-1} / z)^2, the
     # normal interval this covariance gives (and the spread a population draws) is the t interval's
     small_g = (stats.t.ppf(0.975, G - 1) / stats.norm.ppf(0.975)) ** 2
-    return _block(small_g * Hinv @ (G / (G - 1) * per_plant.T @ per_plant) @ Hinv)
+    return _block(small_g * (G - 1) / G * e.T @ e)
 
 
 def wider_of(model: Cov2 | None, clustered: Cov2 | None) -> Cov2 | None:
     """``model`` with each standard error widened to the clustered one's where that is larger (its
     correlation kept, so it stays positive semi-definite). The information's error holds where the canes
-    are independent and the sandwich is noisy at a few plants; where they share their values the
-    sandwich is the one that is right, and the larger of the two errors is the one a reader can trust
-    either way (on canes drawn independently it widens the error by 15-35 % on average at 6 to 12 plants,
-    where the information's own intervals covered 89-95 %: docs/discovery.md, session 64)."""
+    are independent and the jackknife is noisy at a few plants; where they share their values the
+    jackknife is the one that is right, and the larger of the two errors is the one a reader can trust
+    either way (docs/discovery.md, sessions 64 and 65)."""
     if model is None or clustered is None:
         return model
     V = np.array(model)
@@ -592,12 +589,11 @@ def per_cane_test(at: Anchored, log_k_field: np.ndarray, specs: tuple[EffectSpec
                   f"{spread:.3f} in mean |ln k|, under {min_change:.3g}: kept global")
     cov_model = cov_plants = n_plants = None
     if omega > 0:
-        info = _information(h, x1, HESSIAN_STEP)  # once, for both covariances
-        cov_model = _inverse_block(info)
+        cov_model = sampling_cov(h, x1)
         if plants is not None and all(c in plants for c in h.uniq):
             of = np.array([str(plants[c]) for c in h.uniq])
             n_plants = len(np.unique(of))
-            cov_plants = _sandwich_block(info, of)
+            cov_plants = clustered_cov(h, x1, of)
     return PerCaneTest(name, parameter, unit, math.exp(x1[0]), omega, lr, p, alpha, spread, per,
                        {str(c): float(math.exp(v)) for c, v in zip(h.uniq, m)},
                        {str(c): float(s) for c, s in zip(h.uniq, sd)}, reason,

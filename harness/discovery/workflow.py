@@ -626,7 +626,7 @@ def _clustered_text(t: PerCaneTest) -> str:
         return ""
     names = ("ln median", "ln ln sd")
     wide = [f"{names[i]} from {_se(t.cov_ln_model)[i]:.2f}" for i in (0, 1) if t.cov_ln[i][i] > t.cov_ln_model[i][i]]
-    return f"; clustered by plant over {t.n_plants} plants, which widened {' and '.join(wide)}" if wide else ""
+    return f"; clustered by plant (a jackknife over {t.n_plants} plants), which widened {' and '.join(wide)}" if wide else ""
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:
