@@ -102,6 +102,9 @@ class PerCaneTest:
     cov_ln_model, cov_ln_plants, n_plants
         The two covariances it is made of (the clustered one None without plants, with fewer than
         :data:`MIN_PLANTS`, or where it cannot be had) and the number of plants.
+    spread_lost_without
+        The plants without whose canes the jackknife's refit finds no spread
+        (:attr:`PlantJackknife.lost_without`): ln omega's error is then unbounded.
     """
 
     effect: str
@@ -121,6 +124,7 @@ class PerCaneTest:
     cov_ln_model: Cov2 | None = None
     cov_ln_plants: Cov2 | None = None
     n_plants: int | None = None
+    spread_lost_without: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {"parameter": self.parameter, "unit": self.unit, "per_cane": self.per_cane,
@@ -128,6 +132,7 @@ class PerCaneTest:
                 "alpha": self.alpha, "spread_mean_abs_ln_k": self.spread, "reason": self.reason,
                 "cov_ln_median_ln_sd": _listed(self.cov_ln), "cov_ln_information": _listed(self.cov_ln_model),
                 "cov_ln_clustered_by_plant": _listed(self.cov_ln_plants), "n_plants": self.n_plants,
+                "spread_lost_without_plants": list(self.spread_lost_without),
                 "values": dict(self.values), "ln_sd_each": dict(self.ln_sd_each)}
 
     def to_df(self) -> "Any":
@@ -403,7 +408,33 @@ def sampling_cov(h: _Hierarchy, theta: np.ndarray, step: float = HESSIAN_STEP) -
     return _block(np.linalg.inv(H))
 
 
-def clustered_cov(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray) -> Cov2 | None:
+#: Nelder-Mead's settings for a fit with omega free
+FREE_FIT_OPTIONS = {"xatol": 1e-3, "fatol": 1e-4, "maxiter": 4000, "maxfev": 4000}
+#: a leave-one-plant-out refit whose spread lowers -ln L by less than this from omega = 0 (its other
+#: parameters held) has found none: the likelihood is flat in ln omega below about -8, and where
+#: Nelder-Mead stops there (ln omega -11 to -13, moving with the start) says nothing
+NO_SPREAD_NLL = 1e-3
+
+
+@dataclass(frozen=True)
+class PlantJackknife:
+    """:func:`jackknife_over_plants`'s answer.
+
+    Attributes
+    ----------
+    cov
+        The covariance of (mu, ln omega) (:func:`clustered_cov`), None where it cannot be had.
+    lost_without
+        The plants without whose canes the refit finds no spread (omega at 0): ln omega's error is then
+        unbounded, and ``cov`` holds the most a population draws within
+        (:data:`~canebench.model.effects.COV_LN_MAX`) in its place, uncorrelated with mu.
+    """
+
+    cov: Cov2 | None
+    lost_without: tuple[str, ...] = ()
+
+
+def jackknife_over_plants(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray) -> PlantJackknife:
     """The sampling covariance of (mu, ln omega) with the canes of a plant not taken as independent:
     the jackknife over plants. Each plant's canes are left out in turn and the hierarchy refitted
     (from ``theta``); over the G estimates e_g of (mu, ln omega) the covariance is
@@ -413,14 +444,18 @@ def clustered_cov(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray) -> Cov2 
     is its crown's and its soil's as much as its cane's) it has fewer independent values than canes,
     and the information's error is too small by about the square root of the canes a plant. The
     jackknife holds either way. It replaced session 64's sandwich (the plants' summed scores about the
-    information), which is the jackknife's first-order form: where one plant's canes carry the spread,
-    leaving them out moves ln omega further than the curvature at the fit says, and the sandwich's
-    error of ln omega ran low (coverage 81 % on 6 plants of 3 canes sharing their values, against the
-    jackknife's 92 %; docs/discovery.md, session 65). A Wald interval from G plants has G - 1 degrees
-    of freedom, hence the t scaling (1.72 in variance at six plants). Where the spread rests on one
-    plant, leaving it out sends ln omega toward its floor and the error is as large as that says
-    (a population draws it cut to :data:`~canebench.model.effects.COV_LN_MAX`). None with fewer than
-    :data:`MIN_PLANTS` plants, at omega = 0, or where a refit is not finite.
+    information), whose error of ln omega, a variance's, ran low: on 200 datasets of 6 and 12 plants of
+    3 canes sharing their values the sandwich covered ln omega 83-85.5 %, the jackknife 90-94 %
+    (docs/discovery.md, session 65). A Wald interval from G plants has G - 1 degrees of freedom, hence
+    the t scaling (1.72 in variance at six plants).
+
+    Where leaving out a plant's canes leaves no spread (the refit's omega does not beat omega = 0 by
+    :data:`NO_SPREAD_NLL`), the spread rests on that plant and ln omega's error has no bound: the
+    plant is named in ``lost_without``, and ln omega's variance is the most a population draws within
+    (:data:`~canebench.model.effects.COV_LN_MAX`), uncorrelated with mu, whose jackknife stands.
+
+    ``cov`` is None with fewer than :data:`MIN_PLANTS` plants, at omega = 0 or a ``theta`` that is not
+    finite, or where a refit fails (Nelder-Mead out of evaluations, or no finite likelihood).
 
     Parameters
     ----------
@@ -433,19 +468,32 @@ def clustered_cov(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray) -> Cov2 
     groups, g_inv = np.unique(plants, return_inverse=True)
     theta = np.asarray(theta, float)
     if len(groups) < MIN_PLANTS or not (np.all(np.isfinite(theta)) and theta[1] > LOG_FLOOR):
-        return None
-    est = []
-    for k in range(len(groups)):
-        x, _ = _fit(h.without(g_inv == k), [theta], free_omega=True)
-        if not np.all(np.isfinite(x[:2])):
-            return None
+        return PlantJackknife(None)
+    est, lost = [], []
+    for k, g in enumerate(groups):
+        sub = h.without(g_inv == k)
+        res = minimize(sub.nll, theta, method="Nelder-Mead", options=FREE_FIT_OPTIONS)
+        if not (res.success and res.fun < 1e12):  # nll is 1e12 where the likelihood is not finite
+            return PlantJackknife(None)
+        x = res.x
+        if sub.nll(np.array([x[0], -np.inf, x[2], x[3]])) - res.fun < NO_SPREAD_NLL:
+            lost.append(str(g))
         est.append(x[:2])
     G = len(groups)
     e = np.array(est) - np.mean(est, axis=0)
     # a Wald interval from G plants has G - 1 degrees of freedom: scaled by (t_{G-1} / z)^2, the
     # normal interval this covariance gives (and the spread a population draws) is the t interval's
     small_g = (stats.t.ppf(0.975, G - 1) / stats.norm.ppf(0.975)) ** 2
-    return _block(small_g * (G - 1) / G * e.T @ e)
+    V = small_g * (G - 1) / G * e.T @ e
+    if lost:
+        V[0, 1] = V[1, 0] = 0.0
+        V[1, 1] = COV_LN_MAX[1]
+    return PlantJackknife(_block(V), tuple(lost))
+
+
+def clustered_cov(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray) -> Cov2 | None:
+    """:func:`jackknife_over_plants`'s covariance alone."""
+    return jackknife_over_plants(h, theta, plants).cov
 
 
 def wider_of(model: Cov2 | None, clustered: Cov2 | None) -> Cov2 | None:
@@ -505,8 +553,7 @@ def _fit(h: _Hierarchy, starts: list[np.ndarray], free_omega: bool) -> tuple[np.
     best = None
     for s in starts:
         if free_omega:
-            res = minimize(h.nll, s, method="Nelder-Mead",
-                           options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 4000, "maxfev": 4000})
+            res = minimize(h.nll, s, method="Nelder-Mead", options=FREE_FIT_OPTIONS)
             x = res.x
         else:
             def obj(t: np.ndarray) -> float:
@@ -588,13 +635,15 @@ def per_cane_test(at: Anchored, log_k_field: np.ndarray, specs: tuple[EffectSpec
         reason = (f"{parameter} varies between canes (p = {p:.2g}) but the canes' own values move the model by "
                   f"{spread:.3f} in mean |ln k|, under {min_change:.3g}: kept global")
     cov_model = cov_plants = n_plants = None
+    lost: tuple[str, ...] = ()
     if omega > 0:
         cov_model = sampling_cov(h, x1)
         if plants is not None and all(c in plants for c in h.uniq):
             of = np.array([str(plants[c]) for c in h.uniq])
             n_plants = len(np.unique(of))
-            cov_plants = clustered_cov(h, x1, of)
+            jk = jackknife_over_plants(h, x1, of)
+            cov_plants, lost = jk.cov, jk.lost_without
     return PerCaneTest(name, parameter, unit, math.exp(x1[0]), omega, lr, p, alpha, spread, per,
                        {str(c): float(math.exp(v)) for c, v in zip(h.uniq, m)},
                        {str(c): float(s) for c, s in zip(h.uniq, sd)}, reason,
-                       wider_of(cov_model, cov_plants), cov_model, cov_plants, n_plants)
+                       wider_of(cov_model, cov_plants), cov_model, cov_plants, n_plants, lost)

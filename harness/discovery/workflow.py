@@ -103,7 +103,7 @@ from ..data.dataset import Trial
 from ..execute.runner import run_trials
 from ..measure.fit import halves_slope_ratio
 from ..model.config import ModelConfig
-from ..model.effects import EFFECTS, AppliedEffects, EffectSpec
+from ..model.effects import COV_LN_MAX, EFFECTS, AppliedEffects, EffectSpec
 from ..model.presets import PRESETS
 from ..probe.protocol import PROTOCOLS
 from . import engine_runs
@@ -621,12 +621,17 @@ def _se(cov: Cov2) -> tuple[float, float]:
 
 
 def _clustered_text(t: PerCaneTest) -> str:
-    """Which standard errors the clustering by plant widened, and from what."""
+    """Which standard errors the clustering by plant widened, and from what; and the plants without
+    whose canes the spread is not found, which leave ln ln sd's error unbounded."""
     if t.cov_ln_model is None or t.cov_ln is None:
         return ""
     names = ("ln median", "ln ln sd")
     wide = [f"{names[i]} from {_se(t.cov_ln_model)[i]:.2f}" for i in (0, 1) if t.cov_ln[i][i] > t.cov_ln_model[i][i]]
-    return f"; clustered by plant (a jackknife over {t.n_plants} plants), which widened {' and '.join(wide)}" if wide else ""
+    text = f"; clustered by plant (a jackknife over {t.n_plants} plants), which widened {' and '.join(wide)}" if wide else ""
+    if t.spread_lost_without:
+        text += (f"; without the canes of plant {', '.join(t.spread_lost_without)} no spread is found, so ln ln sd's "
+                 f"error has no bound and is taken as {math.sqrt(COV_LN_MAX[1]):.2f}, the most a population draws within")
+    return text
 
 
 def _obstruction_entry(fc: FieldContacts, unscored: dict[str, str]) -> dict[str, Any]:
