@@ -445,7 +445,7 @@ def jackknife_over_plants(h: _Hierarchy, theta: np.ndarray, plants: np.ndarray) 
     and the information's error is too small by about the square root of the canes a plant. The
     jackknife holds either way. It replaced session 64's sandwich (the plants' summed scores about the
     information), whose error of ln omega, a variance's, ran low: on 200 datasets of 6 and 12 plants of
-    3 canes sharing their values the sandwich covered ln omega 83-85.5 %, the jackknife 90-94 %
+    3 canes sharing their values the sandwich covered ln omega 83-85.5 %, the jackknife 90-93 %
     (docs/discovery.md, session 65). A Wald interval from G plants has G - 1 degrees of freedom, hence
     the t scaling (1.72 in variance at six plants).
 
