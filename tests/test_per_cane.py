@@ -247,6 +247,29 @@ def _fit_linear(h, mu, s2, t2):
     return x1
 
 
+def _six_plants_sharing(seed, omega):
+    """Six plants of three canes whose values are their plant's, on the linear hierarchy, fitted; and
+    the Gaussian marginal -ln L of a set of canes written with scipy (``w`` holds omega, for omega = 0)."""
+    from scipy.stats import multivariate_normal
+
+    rng = np.random.default_rng(seed)
+    canes, inv, b = _eighteen_canes([-0.8, -0.55, -0.3])
+    a = rng.normal(0.0, 0.3, len(canes))
+    plant = np.arange(18) // 3
+    mu, s2, t2 = math.log(50.0), 0.05**2, 0.15**2
+    y = _draw_by_plant(rng, plant, a, b, inv, mu, omega, s2, t2)
+    h = _linear_hierarchy(a, b, y, canes, np.zeros((len(y), len(y))))
+
+    def nll(th, cs, w=None):
+        m, v, u = th[0], math.exp(th[-2]), math.exp(th[-1])
+        w = math.exp(th[1]) if w is None else w
+        return -sum(multivariate_normal(a[inv == c] + b[inv == c] * m,
+                                        v * np.eye(3) + u + w**2 * np.outer(b[inv == c], b[inv == c])
+                                        ).logpdf(y[inv == c]) for c in cs)
+
+    return h, _fit_linear(h, mu, s2, t2), plant, nll
+
+
 def test_the_spreads_error_clustered_by_plant_is_the_jackknife_over_the_plants():
     """:func:`clustered_cov` against the jackknife written out here: each plant's canes left out in turn,
     (mu, ln omega) refitted by another optimizer (BFGS from the full fit, gradient tolerance 1e-7) on the
@@ -261,25 +284,10 @@ def test_the_spreads_error_clustered_by_plant_is_the_jackknife_over_the_plants()
     the canes is an error)."""
     from scipy import stats
     from scipy.optimize import minimize
-    from scipy.stats import multivariate_normal
 
     from canebench.discovery import per_cane as pc
 
-    rng = np.random.default_rng(21)
-    canes, inv, b = _eighteen_canes([-0.8, -0.55, -0.3])
-    a = rng.normal(0.0, 0.3, len(canes))
-    plant = np.arange(18) // 3
-    mu, omega, s2, t2 = math.log(50.0), 0.6, 0.05**2, 0.15**2
-    y = _draw_by_plant(rng, plant, a, b, inv, mu, omega, s2, t2)
-    h = _linear_hierarchy(a, b, y, canes, np.zeros((len(y), len(y))))
-    x1 = _fit_linear(h, mu, s2, t2)
-
-    def nll(th, cs):
-        m, w, v, u = th[0], math.exp(th[1]), math.exp(th[2]), math.exp(th[3])
-        return -sum(multivariate_normal(a[inv == c] + b[inv == c] * m,
-                                        v * np.eye(3) + u + w**2 * np.outer(b[inv == c], b[inv == c])
-                                        ).logpdf(y[inv == c]) for c in cs)
-
+    h, x1, plant, nll = _six_plants_sharing(21, 0.6)
     est = []
     for k in range(6):
         res = minimize(nll, x1, args=(np.flatnonzero(plant != k),), method="BFGS", options={"gtol": 1e-7})
@@ -340,27 +348,11 @@ def test_a_spread_that_rests_on_one_plant_has_an_unbounded_error_taken_as_the_mo
     flat ln omega below -8 moves with its start: the answer must not (a start 0.05 away in ln omega)."""
     from scipy import stats
     from scipy.optimize import minimize
-    from scipy.stats import multivariate_normal
 
     from canebench.discovery import per_cane as pc
     from canebench.model.effects import COV_LN_MAX
 
-    rng = np.random.default_rng(19)
-    canes, inv, b = _eighteen_canes([-0.8, -0.55, -0.3])
-    a = rng.normal(0.0, 0.3, len(canes))
-    plant = np.arange(18) // 3
-    mu, omega, s2, t2 = math.log(50.0), 0.25, 0.05**2, 0.15**2
-    y = _draw_by_plant(rng, plant, a, b, inv, mu, omega, s2, t2)
-    h = _linear_hierarchy(a, b, y, canes, np.zeros((len(y), len(y))))
-    x1 = _fit_linear(h, mu, s2, t2)
-
-    def nll(th, cs, w=None):
-        m, v, u = th[0], math.exp(th[-2]), math.exp(th[-1])
-        w = math.exp(th[1]) if w is None else w
-        return -sum(multivariate_normal(a[inv == c] + b[inv == c] * m,
-                                        v * np.eye(3) + u + w**2 * np.outer(b[inv == c], b[inv == c])
-                                        ).logpdf(y[inv == c]) for c in cs)
-
+    h, x1, plant, nll = _six_plants_sharing(19, 0.25)
     mus, gains = [], []
     for k in range(6):
         cs = np.flatnonzero(plant != k)
