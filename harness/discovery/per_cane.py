@@ -215,9 +215,8 @@ class _Hierarchy:
 
     def __init__(self, grid: np.ndarray, P: np.ndarray, pen: np.ndarray, y: np.ndarray, canes: np.ndarray,
                  G: np.ndarray):
-        # kept for :meth:`without`
-        self._given = (np.asarray(grid, float), np.asarray(P, float), np.asarray(pen, float),
-                       np.asarray(y, float), np.asarray(canes), np.asarray(G, float))
+        # the tables as given, for :meth:`without` (the grid and y are kept below)
+        self._tables = (np.asarray(P, float), np.asarray(pen, float), np.asarray(canes), np.asarray(G, float))
         self.grid = np.asarray(grid, float)
         self.Ps = CubicSpline(self.grid, np.asarray(P, float), axis=0)
         self.dPs = self.Ps.derivative()
@@ -236,10 +235,10 @@ class _Hierarchy:
 
     def without(self, drop: np.ndarray) -> "_Hierarchy":
         """The hierarchy of the canes not in ``drop`` ((canes,) bool, in the order of ``uniq``)."""
-        grid, P, pen, y, canes, G = self._given
-        keep = ~np.asarray(drop, bool)[self.inv]
-        return _Hierarchy(grid, P[:, keep], pen[:, ~np.asarray(drop, bool)], y[keep], canes[keep],
-                          G[np.ix_(keep, keep)])
+        P, pen, canes, G = self._tables
+        drop = np.asarray(drop, bool)
+        keep = ~drop[self.inv]
+        return _Hierarchy(self.grid, P[:, keep], pen[:, ~drop], self.y[keep], canes[keep], G[np.ix_(keep, keep)])
 
     def _at(self, spline: CubicSpline, slope: CubicSpline, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """A table's values and slopes at ``u``; beyond the grid's ends it goes on straight, with the
