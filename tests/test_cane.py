@@ -39,6 +39,12 @@ def bad(path_fn, value):
     (lambda d: d["push_points"][0].pop("height"), "push_points[0]"),
     (lambda d: d["push_points"].append({"id": "1", "s": 0.2}), "push_points[1].id"),
     (lambda d: d["push_points"][0].__setitem__("direction", [0, 0, 1]), "push_points[0].direction"),
+    # a push at the clamp deflects nothing (every engine failed on it, each in its own words)
+    (lambda d: d["push_points"][0].__setitem__("height", 0.0), "push_points[0].height"),
+    (lambda d: d["push_points"][0].update(s=0.0005) or d["push_points"][0].pop("height"), "push_points[0].s"),
+    # assumptions are sentences: a number crashed the run, a string was split into characters
+    (lambda d: d.__setitem__("provenance", {"assumptions": 5}), "provenance.assumptions"),
+    (lambda d: d.__setitem__("provenance", {"assumptions": ["ok", 3]}), "provenance.assumptions"),
 ])
 def test_invalid_descriptions_name_the_field(mutate, field):
     d = copy.deepcopy(GOOD)
@@ -62,6 +68,19 @@ def test_malformed_yaml_names_file_and_line(tmp_path: Path):
     with pytest.raises(InputError) as e:
         load_cane(p)
     assert "broken.yaml" in str(e.value) and "line" in e.value.field
+
+
+def test_a_key_given_twice_is_an_error_not_the_last_one_kept(tmp_path: Path):
+    """PyYAML keeps the last of two equal keys: a second ``calipers:`` block replaced the measured
+    calipers without a word (an input review, session 66)."""
+    p = tmp_path / "twice.yaml"
+    p.write_text(yaml.safe_dump(GOOD) + "calipers: [{height: 0.2, diameter: 0.02}]\n")
+    assert yaml.safe_load(p.read_text())["calipers"][0]["diameter"] == 0.02  # what PyYAML alone does
+    with pytest.raises(InputError, match="twice.yaml.*key 'calipers' given twice"):
+        load_cane(p)
+    # one sentence alone is a list of one
+    one = {**GOOD, "provenance": {"assumptions": "straight cane"}}
+    assert cane_from_dict(one, "x").provenance["assumptions"] == ["straight cane"]
 
 
 def test_round_trip_through_yaml(tmp_path: Path):

@@ -78,3 +78,46 @@ def test_bundled_polylines_do_not_fold_and_the_truth_shares_no_chain_code():
     # the hidden truth is the continuum rod, not the harness's chains or their exact statics
     src = (REPO / "canes" / "generate.py").read_text()
     assert "Rod(" in src and "assemble_chain" not in src and "PinocchioStatic" not in src
+
+
+def test_an_empty_or_unreadable_dataset_is_an_input_error(tmp_path):
+    """A push_points.csv with a header and no rows made `run` fail in its report (max() of nothing)
+    and `discover` with an AttributeError; a folder where a file belongs raised IsADirectoryError
+    (an input review, session 66). Both now name the file."""
+    import shutil
+
+    from canebench.data.dataset import bundled_dataset
+    from canebench.errors import InputError
+
+    d = tmp_path / "empty"
+    shutil.copytree(bundled_dataset(), d)
+    pp = d / "push_points.csv"
+    header = pp.read_text().splitlines()[0]
+    pp.write_text(header + "\n")
+    shutil.rmtree(d / "canes")  # the descriptions would otherwise be strays
+    with pytest.raises(InputError, match=r"push_points.csv: field 'rows': no trials"):
+        load_dataset(d)
+    pp.unlink()
+    pp.mkdir()
+    with pytest.raises(InputError, match=r"push_points.csv: field '<file>': cannot read"):
+        load_dataset(d)
+
+
+def test_a_record_too_short_to_score_is_unscored_not_failed(bundled_trials, tmp_path):
+    """A rig record of two rows has no field slope; the simulation pushes as far as the record and so
+    has too few samples too. That is the record's doing: the row is ``unscored`` with the field's
+    reason, never ``failed`` (README: that word is kept for the simulation)."""
+    import dataclasses
+
+    from canebench.execute.runner import run_trials
+    from canebench.model.presets import PRESETS
+    from canebench.probe.protocol import PROTOCOLS
+
+    t = bundled_trials[0]
+    rig = pd.read_csv(t.csv)
+    short = tmp_path / "short.csv"
+    rig.iloc[:2].to_csv(short, index=False)
+    t2 = dataclasses.replace(t, csv=short)
+    res = run_trials([t2], ["pinocchio"], PROTOCOLS["fast"], PRESETS["default"], tmp_path / "run").to_df()
+    assert list(res.status) == ["unscored"], res[["status", "reason", "field_reason"]]
+    assert res.reason[0].startswith("no field stiffness: ") and res.field_reason[0] in res.reason[0]

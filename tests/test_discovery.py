@@ -5,6 +5,7 @@ from __future__ import annotations
 import html
 import json
 import math
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -163,12 +164,36 @@ def test_model_file_round_trip_and_bad_files(tmp_path):
     assert back == cfg
     assert back.fit_window_mm("b1c1", "b1c1t2") == 12.5 and back.fit_window_mm("b1c1", "b1c1t1") is None
     bad = {"effects: [{effect: wind}]": "wind", "effects: [{effect: root_compliance, params: {k_root: -1}}]": "k_root",
-           "preset: nope": "preset", "colour: red": "colour", "effects: {a: 1}": "effects", "[1, 2": "<file>"}
+           "preset: nope": "preset", "colour: red": "colour", "effects: {a: 1}": "effects", "[1, 2": "<file>",
+           # values of the wrong type reached the checks (or difflib) and raised a TypeError (session 66)
+           "config: {modulus_pa: [1, 2]}": "modulus_pa", "config: {density: {a: 1}}": "density",
+           "config: {diameter_factor: null}": "diameter_factor", "config: {min_segments: 2.5}": "min_segments",
+           "config: {stiffness_formula: 5}": "stiffness_formula", "config: {node_at_push: 3}": "node_at_push",
+           "config: {modulus_pa: true}": "modulus_pa", "preset: [paper]": "preset",
+           "effects: [{effect: probe_misalignment, params: {angle_deg: 1.0e6}}]": "angle_deg",
+           "effects: [{effect: obstruction, params: {onset_mm: -5}}]": "onset_mm",
+           # a key given twice: PyYAML keeps the last without a word
+           "effects: [{effect: root_compliance, params: {k_root: 120, k_root: 5}}]": "given twice"}
     for text, field in bad.items():
         (tmp_path / "bad.yaml").write_text(text)
         with pytest.raises(InputError, match=field) as ei:
             load_model_file(tmp_path / "bad.yaml")
         assert "bad.yaml" in str(ei.value)
+    # within the search bounds no warning; a valid value outside the physical range is warned about, once
+    from canebench.errors import InputWarning
+
+    for text, warned in (("{effect: modulus_scale, params: {scale: 50}}", True),
+                         ("{effect: rig_compliance, params: {k_rig: 1.0e-6}}", True),
+                         ("{effect: modulus_scale, params: {scale: 1.2}}", False)):
+        (tmp_path / "w.yaml").write_text(f"effects: [{text}]")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            load_model_file(tmp_path / "w.yaml")
+        got = [w for w in caught if issubclass(w.category, InputWarning)]
+        assert len(got) == int(warned) and (not warned or "physically plausible" in str(got[0].message)), got
+    assert load_model_file(tmp_path / "w.yaml").replace(min_segments=4).min_segments == 4
+    cfg = PRESETS["default"].with_overrides({"min_segments": 4.0, "modulus_pa": 4e9}, source="f.yaml")
+    assert cfg.min_segments == 4 and isinstance(cfg.min_segments, int)
 
 
 def test_onset_finds_kinks_not_curvature():

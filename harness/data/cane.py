@@ -15,6 +15,7 @@ import numpy as np
 import yaml
 
 from ..errors import InputError, warn_input
+from .strict_yaml import load_yaml
 
 DEFAULT_DENSITY = 580.0  # kg/m^3, paper (Zhang et al.)
 DEFAULT_DAMPING = 0.15  # N m s/rad, paper (Pivato et al.)
@@ -241,6 +242,13 @@ def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
     prov = data.get("provenance", {}) or {}
     if not isinstance(prov, dict):
         raise InputError(src, "provenance", "expected a mapping")
+    if "assumptions" in prov:
+        # each a sentence every result from this cane carries; one sentence alone is a list of one
+        a = prov["assumptions"]
+        a = [a] if isinstance(a, str) else a
+        if not (isinstance(a, list) and all(isinstance(x, str) for x in a)):
+            raise InputError(src, "provenance.assumptions", f"expected a list of sentences (text), got {a!r}")
+        prov = {**prov, "assumptions": a}
     cane = CaneDescription(cid, arr, raw, tuple(calipers), tuple(push_points), material, dict(prov), src)
     _check_extent(cane)
     _check_plausible(cane)
@@ -279,6 +287,12 @@ def _check_extent(cane: CaneDescription) -> None:
         _extent_error(cane, f"calipers[{i}]", c.where, length, zmin, zmax)
     for i, p in enumerate(cane.push_points):
         _extent_error(cane, f"push_points[{i}]", p.where, length, zmin, zmax)
+        # a push at the clamp deflects nothing: every engine would fail on it, each in its own words
+        w = p.where
+        if (w.s is not None and w.s < 1e-3) or (w.height is not None and w.height < zmin + 1e-3):
+            fld, v = ("s", w.s) if w.s is not None else ("height", w.height)
+            raise InputError(cane.source, f"push_points[{i}].{fld}", f"{v:.4g} m is at the clamped base (within "
+                                                                     "1 mm): a push there deflects nothing")
 
 
 def _check_plausible(cane: CaneDescription) -> None:
@@ -330,7 +344,7 @@ def load_cane(path: str | Path) -> CaneDescription:
     except UnicodeDecodeError:
         raise InputError(str(path), "<file>", "not a text file (cannot decode as UTF-8); expected YAML") from None
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else "<yaml>"

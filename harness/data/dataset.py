@@ -51,6 +51,8 @@ def read_push_points(path: Path) -> pd.DataFrame:
         df = pd.read_csv(path)
     except FileNotFoundError:
         raise InputError(src, "<file>", "not found (a dataset needs push_points.csv)") from None
+    except (IsADirectoryError, PermissionError) as exc:
+        raise InputError(src, "<file>", f"cannot read: {exc.strerror}") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(src, "<file>", f"malformed CSV: {exc}") from None
     except UnicodeDecodeError:
@@ -122,6 +124,8 @@ def load_dataset(directory: str | Path, select: str | None = None) -> list[Trial
                                                "every description needs its own id")
             descriptions[c.id] = c
     pp_src = str(d / "push_points.csv")
+    if pp.empty:  # a header alone: every command would have nothing to do, and some would fail obscurely
+        raise InputError(pp_src, "rows", "no trials: the file has a header but no rows")
     wanted = {f"b{int(b)}c{int(c)}" for b, c in zip(pp.bush, pp.cane)}
     if has_yaml:
         # a description nobody probes, or a probed cane without one, is a mismatch:

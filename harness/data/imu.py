@@ -63,6 +63,8 @@ def read_imu_csv(path: str | Path, rate_hz: float = RATE_HZ) -> pd.DataFrame:
         df = pd.read_csv(path, comment="#")
     except FileNotFoundError:
         raise InputError(src, "<file>", "file not found") from None
+    except (IsADirectoryError, PermissionError) as exc:
+        raise InputError(src, "<file>", f"cannot read: {exc.strerror}") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise InputError(src, "<file>", f"malformed CSV: {exc}") from None
     df.columns = [str(c).strip() for c in df.columns]

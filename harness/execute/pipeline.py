@@ -254,6 +254,11 @@ def score(job: Job, result: JobResult, field: FieldResult) -> dict[str, Any]:
     if field.fit is not None and field.fit.usable:
         row["k_field_ci_low"], row["k_field_ci_high"] = field.fit.ci_low, field.fit.ci_high
     row["log_ratio"] = math.nan
+    usable = field.fit is not None and field.fit.usable
+    if row["status"] == "failed" and not usable and str(row.get("reason", "")).startswith("too few samples"):
+        # the simulation pushes as far as the field record: a record too short to score leaves it short
+        # too, and that is the record's doing, not the engine's
+        row["status"], row["reason"] = "unscored", f"no field stiffness: {field.reason}"
     if row["status"] == "ok":
         if k_field > 0:
             row["log_ratio"] = math.log(row["k_sim"] / k_field)

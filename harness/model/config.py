@@ -200,6 +200,9 @@ class ModelConfig:
         except InputError as exc:  # name where the bad value came from
             raise InputError(source, exc.field, exc.message) from None
         _warn_implausible(changes, source)
+        if "effects" in changes:
+            for e in out.effects:
+                e.warn_implausible(source)
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -256,7 +259,7 @@ def parse_assignments(items: list[str] | None, source: str = "--set") -> dict[st
 
 def _coerce(raw: Any, hint: Any, source: str, key: str) -> Any:
     if not isinstance(raw, str):
-        return raw
+        return _checked_value(raw, hint, source, key)
     text = raw.strip()
     if typing.get_origin(hint) is tuple:
         return tuple(split_effects_text(text))
@@ -284,3 +287,35 @@ def _coerce(raw: Any, hint: Any, source: str, key: str) -> Any:
     except ValueError as exc:
         what = "a finite number" if base is float else getattr(base, "__name__", base)
         raise InputError(source, key, f"cannot read {raw!r} as {what}") from exc
+
+
+def _checked_value(raw: Any, hint: Any, source: str, key: str) -> Any:
+    """A value that is not text (a model file's YAML) checked against the field's type: a list for a
+    modulus, a null where none is allowed or ``true`` for a number would otherwise reach the checks
+    (or the engines) as something else."""
+    if typing.get_origin(hint) is tuple:
+        return raw  # effects: parsed and validated by EffectSpec
+    args = typing.get_args(hint)
+    optional = type(None) in args
+    base = next((a for a in args if a is not type(None)), hint) if args else hint
+    if raw is None:
+        if optional:
+            return None
+        raise InputError(source, key, "must be given (null is not allowed here)")
+    if base is bool:
+        if isinstance(raw, bool):
+            return raw
+        raise InputError(source, key, f"must be true or false, got {raw!r}")
+    if base in (int, float):
+        number = isinstance(raw, (int, float)) and not isinstance(raw, bool)
+        if number and base is int and isinstance(raw, float) and raw.is_integer():
+            raw = int(raw)
+        if not number or (base is int and not isinstance(raw, int)):
+            what = "a whole number" if base is int else "a number"
+            raise InputError(source, key, f"must be {what}, got {raw!r} ({type(raw).__name__})")
+        if not math.isfinite(raw):
+            raise InputError(source, key, f"must be finite, got {raw!r}")
+        return raw
+    if base is str and not isinstance(raw, str):
+        raise InputError(source, key, f"must be text, got {raw!r} ({type(raw).__name__})")
+    return raw

@@ -37,7 +37,7 @@ from typing import Any, ClassVar, Mapping, NamedTuple
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, warn_input
 from ..registry import Registry
 
 ENTRY_POINT_GROUP = "canebench.effects"
@@ -60,9 +60,10 @@ class Parameter:
         Searched on a log scale (positive quantities spanning decades); only
         positive values are valid.
     doc : str
-    minimum : float
-        Smallest physically valid value (beyond the search bounds: a model
-        file may set any valid value).
+    minimum, maximum : float
+        Smallest and largest valid values (beyond the search bounds: a model
+        file may set any valid value; one outside the physically plausible
+        range, where ``low`` and ``high`` are its ends, is warned about).
     physical_bounds : bool
         Whether ``low`` and ``high`` are the ends of the physically plausible range (a modulus 0.2 to 5
         times the stated one, a root no softer than 0.3 N m/rad, a rig no softer than 20 N/m, a pitch
@@ -88,6 +89,7 @@ class Parameter:
     minimum: float = -math.inf
     switches_off: bool = True
     physical_bounds: bool = True
+    maximum: float = math.inf
 
 
 class Effect:
@@ -229,7 +231,8 @@ class ProbeMisalignment(Effect):
     name = "probe_misalignment"
     summary = "the probe is pitched from perpendicular to the cane by angle_deg (positive up)"
     where = "probe"
-    parameters = {"angle_deg": Parameter("deg", -45.0, 45.0, 0.0, False, "probe pitch")}
+    # beyond 89 degrees the probe pushes along the cane (the configuration's probe_angle_deg has the same limit)
+    parameters = {"angle_deg": Parameter("deg", -45.0, 45.0, 0.0, False, "probe pitch", minimum=-89.0, maximum=89.0)}
 
     def probe_pitch_deg(self) -> float:
         return self.p["angle_deg"]
@@ -245,7 +248,7 @@ class Obstruction(Effect):
     where = "trial"
     parameters = {"onset_mm": Parameter("mm", 1.0, 200.0, math.inf, False,
                                         "displacement after contact at which the second body engages",
-                                        physical_bounds=False),
+                                        minimum=0.0, physical_bounds=False),
                   "record_end_mm": Parameter("mm", 0.0, 1000.0, math.inf, False,
                                              "where the field record is cut (travel from its first sample): set at "
                                              "the elbow where the elbow hides the contact knee from the field "
@@ -515,6 +518,22 @@ class EffectSpec:
         par = EFFECTS[self.name].parameters
         return {p: par[p].unit for p, _ in self.params}
 
+    def warn_implausible(self, source: str) -> None:
+        """Warn (an error under ``--strict``) of each value outside its parameter's physically
+        plausible range (a modulus 50 times the stated one, a rig of 1e-6 N/m): valid, so a user may
+        mean it, but the answer is then no plant's. Called where a user's values come in (a model
+        file, ``--set``), not on every configuration the workflow builds."""
+        cls = EFFECTS.get(self.name)
+        if cls is None:
+            return
+        for where, pairs in (("", self.params), *((f"[{k}]", v) for k, v in self.local)):
+            for k, v in pairs:
+                par = cls.parameters.get(k)
+                if par is not None and par.physical_bounds and v != par.null and not par.low <= v <= par.high:
+                    unit = "" if par.unit == "1" else f" {par.unit}"
+                    warn_input(source, f"{self.name}{where}.{k}", f"{v:g}{unit} is outside {par.low:g} to "
+                               f"{par.high:g}{unit}, the physically plausible range ({par.doc})")
+
     def validate(self, source: str) -> None:
         load_entry_points()
         if self.name not in EFFECTS:
@@ -533,8 +552,10 @@ class EffectSpec:
                                      f"unknown parameter; {self.name} has {', '.join(cls.parameters)}")
                 par = cls.parameters[k]
                 ok = math.isfinite(v) or v == par.null
-                if not ok or (par.log and v <= 0) or v < par.minimum:
-                    raise InputError(source, f"{self.name}{where}.{k}", f"invalid value {v!r} ({par.unit})")
+                if not ok or (par.log and v <= 0) or v < par.minimum or v > par.maximum:
+                    limits = (f"; valid: {par.minimum:g} to {par.maximum:g}"
+                              if math.isfinite(par.minimum) and math.isfinite(par.maximum) else "")
+                    raise InputError(source, f"{self.name}{where}.{k}", f"invalid value {v!r} ({par.unit}){limits}")
         for k, spread in self.between:
             where = f"{self.name}.between_canes.{k}"
             if k not in cls.parameters:

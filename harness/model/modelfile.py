@@ -27,6 +27,7 @@ from typing import Any
 
 import yaml
 
+from ..data.strict_yaml import load_yaml
 from ..errors import InputError
 from .config import ModelConfig
 from .effects import EffectSpec
@@ -54,7 +55,7 @@ def load_model_file(path: str | Path) -> ModelConfig:
     except (UnicodeDecodeError, IsADirectoryError) as exc:
         raise InputError(src, "<file>", f"not a readable text file: {exc}") from None
     try:
-        doc = yaml.safe_load(text)
+        doc = load_yaml(text)
     except yaml.YAMLError as exc:
         raise InputError(src, "<file>", f"malformed YAML/JSON: {exc}") from None
     if not isinstance(doc, dict):
@@ -65,7 +66,7 @@ def load_model_file(path: str | Path) -> ModelConfig:
     if doc.get("canebench_model", FORMAT_VERSION) != FORMAT_VERSION:
         raise InputError(src, "canebench_model", f"format version {doc['canebench_model']!r} is not {FORMAT_VERSION}")
     preset = doc.get("preset", "default")
-    if preset not in PRESETS:
+    if not isinstance(preset, str) or preset not in PRESETS:
         raise InputError(src, "preset", f"unknown preset {preset!r}; known: {', '.join(PRESETS)}")
     base = PRESETS[preset]
     over = doc.get("config") or {}
@@ -85,6 +86,7 @@ def load_model_file(path: str | Path) -> ModelConfig:
                                  if k in ("effect", "name", "params", "local", "scope", "between_canes")},
                                 f"{src}: effects[{i}]")
         spec.validate(f"{src}: effects[{i}]")
+        spec.warn_implausible(f"{src}: effects[{i}]")
         specs.append(spec)
     try:
         return cfg.replace(effects=tuple(specs))
