@@ -100,9 +100,17 @@ class Candidate:
     free: list[tuple[str, str]]  # (effect, parameter) fitted, in vector order
 
     @classmethod
-    def of(cls, names: tuple[str, ...]) -> "Candidate":
-        free = [(n, p) for n in names for p in EFFECTS[n].parameters]
+    def of(cls, names: tuple[str, ...], refined: tuple[tuple[str, str], ...] = ()) -> "Candidate":
+        """Every parameter of ``names`` free but those held until a refinement (``Parameter.refined``,
+        left at their null) that ``refined`` does not list."""
+        free = [(n, p) for n in names for p, par in EFFECTS[n].parameters.items()
+                if not par.refined or (n, p) in refined]
         return cls(tuple(names), free)
+
+    @property
+    def refined(self) -> tuple[tuple[str, str], ...]:
+        """The refinement parameters this candidate fits (:mod:`.refine`)."""
+        return tuple((n, p) for n, p in self.free if EFFECTS[n].parameters[p].refined)
 
     def to_internal(self, values: dict[tuple[str, str], float]) -> np.ndarray:
         out = []

@@ -151,7 +151,7 @@ def judge(F: pd.DataFrame, r_before: np.ndarray, r_after: np.ndarray, lkf: np.nd
         t_w = time.perf_counter()
         taken, tried = within_taken_by(within_takers(candidates, current, unsupported),
                                        current, anchor, lkf, canes_f, height, diameter_factor,
-                                       adequacy["within_after_cv"]["n_trials"], seed)
+                                       adequacy["within_after_cv"]["n_trials"], seed, final.fit.candidate.refined)
         adequacy["within_taken_by"], adequacy["within_tried"] = taken, tried
         timing["within_taken_s"] = time.perf_counter() - t_w
         within_fails = taken is None
@@ -231,8 +231,10 @@ def within_takers(candidates: tuple[str, ...], current: tuple[str, ...],
 
 def within_taken_by(others: tuple[str, ...], current: tuple[str, ...], at: Anchored, lkf: np.ndarray,
                     canes: np.ndarray, height: np.ndarray, factor: float, n_trials: int,
-                    seed: int) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
-    """The unnamed library effect that, added to ``current``, leaves no trend along the canes.
+                    seed: int, refined: tuple[tuple[str, str], ...] = ()
+                    ) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
+    """The unnamed library effect that, added to ``current`` (with the refinements it was given,
+    ``refined``: :mod:`.refine`), leaves no trend along the canes.
 
     The within-cane check's null carries the caliper line's random error, not the taper's shape
     below the lowest caliper: three calipers near the push points cannot see a power-law taper's
@@ -257,7 +259,7 @@ def within_taken_by(others: tuple[str, ...], current: tuple[str, ...], at: Ancho
     best: dict[str, Any] | None = None
     tried: list[dict[str, Any]] = []
     for c in others:
-        cv = cross_validate(Candidate.of(current + (c,)), at, lkf)
+        cv = cross_validate(Candidate.of(current + (c,), refined), at, lkf)
         spec = next(s for s in cv.fit.specs if s.name == c)
         row: dict[str, Any] = {"effect": c, "params": dict(spec.params), "r": math.nan, "p": math.nan}
         hits = bounds_reached(spec)

@@ -42,6 +42,10 @@
    the rest refitted and re-anchored without it, the backward pass run, and
    the intervals drawn again; nothing takes its place, and the result is
    ``unexplained`` (the residuals leaned its way significantly).
+   Then each parameter held at its null during the selection (``Parameter.refined``: a flare's
+   ``size_exponent``, one collar for every cane or a share of each cane's diameter) is freed where
+   the selected model's likelihood ratio and held-out density ask for it (:mod:`.refine`), the
+   model re-anchored and its intervals drawn again.
 5. Adequacy (:func:`.adequacy.level_trend_geometry`): the held-out residual
    must not trend with the model's own stiffness level between canes beyond
    what the caliper-fit geometry's own error makes it do. A model that fails
@@ -112,6 +116,7 @@ from .contacts import FieldContacts, read_contacts
 from .fit import bootstrap_ci
 from .nulls import ci_of
 from .per_cane import PER_CANE_ALPHA, Cov2, PerCaneTest, per_cane_test, varying_parameter
+from .refine import refine
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, drop_unsupported, forward_select
 from .structure import between_share
@@ -159,6 +164,8 @@ class DiscoveryResult:
     too_small_to_name: dict[str, Any] | None = None
     #: the named effects found to differ per cane, by name (:mod:`.per_cane`)
     per_cane: dict[str, PerCaneTest] = field(default_factory=dict)
+    #: the refinements tried on the selected model (:func:`.refine.refine`), adopted or not
+    refinements: list[dict[str, Any]] = field(default_factory=list)
 
     def model_file_config(self) -> ModelConfig:
         """The fitted model as ``model.yaml`` holds it: :attr:`config` (what the engines confirmed,
@@ -185,7 +192,8 @@ class DiscoveryResult:
             tr.append(row)
         return {"baseline": self.baseline, "named": self.named, "unexplained": bool(self.unexplained),
                 "partial": self.partial, "unsupported": self.unsupported,
-                "too_small_to_name": self.too_small_to_name, "gap": self.gap, "trials": tr,
+                "too_small_to_name": self.too_small_to_name, "refinements": self.refinements,
+                "gap": self.gap, "trials": tr,
                 "stop_reason": self.stop_reason,
                 "notes": self.notes,
                 # NaN (a column a row does not have) as null: strict JSON
@@ -402,6 +410,20 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         stop += "; not named, for an interval that reaches no effect: " + ", ".join(
             u["effect"] + ("" if u["covers_null"] else f" (with {u['dropped_with']})") for u in unsupported)
 
+    # -- refinements of the selected effects' forms (a flare that grows with the cane), then their intervals
+    refinements: list[dict[str, Any]] = []
+    if current:
+        t_r = time.perf_counter()
+        cv_cur, at, tried = refine(cv_cur, at, lkf, lambda at_, cv_: reanchor(at_, cv_))
+        refinements = [r.to_dict() for r in tried]
+        notes.extend(r.note() for r in tried)
+        if any(r.adopted for r in tried):
+            ci = draw_ci(cv_cur.fit, at)
+            steps.append({"step": len(current), "model": "+".join(current), "candidate": "refined: " + ", ".join(
+                f"{r.effect}.{r.parameter}" for r in tried if r.adopted), "bic": cv_cur.fit.bic,
+                "params": {sp.name: dict(sp.params) for sp in cv_cur.fit.specs}, "chosen": True})
+        timing["refine_s"] = time.perf_counter() - t_r
+
     final = cv_cur
     r_before = lkf - lkb0
     r_after = final.residual
@@ -471,7 +493,7 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     result = DiscoveryResult(baseline, named, verdict.unexplained or sel.too_small is not None, gap, feats,
                              pd.DataFrame(steps), verdict.structure_before, verdict.structure_after, model, engines,
                              stop, notes, timing, anchors, adequacy, partial, partial_config,
-                             pitch_table, unsupported, sel.too_small, per_cane)
+                             pitch_table, unsupported, sel.too_small, per_cane, refinements)
     result.notes.append(f"baseline: {base_text}")
     if any(t.cane.provenance.get("assumptions") for t in trials):
         for a in dict.fromkeys(a for t in trials for a in t.cane.provenance.get("assumptions", [])):

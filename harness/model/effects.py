@@ -78,6 +78,11 @@ class Parameter:
         name an effect whose 95 % interval of such a parameter reaches ``null``
         (or, for a null beyond the search bounds, the bound on its side: a
         spring's stiffest bound stands for infinitely stiff).
+    refined : bool
+        Held at ``null`` while the discovery workflow selects effects, and fitted only afterwards,
+        on the selected model, where a likelihood-ratio test asks for it
+        (:mod:`canebench.discovery.refine`): a refinement of an effect's form that the data can
+        seldom resolve, and whose extra freedom should not help an effect be named.
     """
 
     unit: str
@@ -90,6 +95,7 @@ class Parameter:
     switches_off: bool = True
     physical_bounds: bool = True
     maximum: float = math.inf
+    refined: bool = False
 
 
 class Effect:
@@ -203,28 +209,44 @@ class RigCompliance(Effect):
 
 
 class BaseFlare(Effect):
-    """d(s) = d_fit(s) + excess exp(-s / length).
+    """d(s) = d_fit(s) + excess (d_fit(s) / 10 mm)^q exp(-s / length).
 
-    An absolute thickening (not a fraction of the fitted diameter): a root
-    collar is similar in size on thin and thick canes, so it stiffens thin
-    canes far more, which is what the field data shows. Calipers taken at
-    the push points cannot see it.
+    By default (q = 0) an absolute thickening, not a fraction of the fitted
+    diameter: a root collar similar in size on thin and thick canes, which
+    stiffens thin canes far more, as the field data show. With q = 1 the
+    excess is a share of the cane's own diameter, d_fit(s) (1 + A exp(-s /
+    length)) with A = excess / 10 mm: a collar that grows with the cane.
+    ``size_exponent`` (q) is held at 0 while effects are selected and fitted
+    only where the selected model's likelihood asks for it
+    (:mod:`canebench.discovery.refine`): among canes of one size the two forms
+    are the same flare. Calipers taken at the push points cannot see it.
     """
 
     name = "base_flare"
     summary = ("the cane thickens toward the base beyond the linear caliper fit: "
-               "d(s) = d_fit(s) + excess_mm exp(-s / length_mm)")
+               "d(s) = d_fit(s) + excess_mm (d_fit(s) / 10 mm)^size_exponent exp(-s / length_mm)")
     where = "geometry"
-    parameters = {"excess_mm": Parameter("mm", 0.0, 25.0, 0.0, False, "extra diameter at the ground", minimum=0.0,
+    #: the diameter at which ``excess_mm`` is the excess whatever ``size_exponent`` is (m)
+    D_REF_M = 0.010
+    parameters = {"excess_mm": Parameter("mm", 0.0, 25.0, 0.0, False, "extra diameter at the ground (of a cane "
+                                         "10 mm thick there, where size_exponent is not 0)", minimum=0.0,
                                          physical_bounds=False),
                   "length_mm": Parameter("mm", 20.0, 600.0, 150.0, True, "e-folding length of the excess",
                                           physical_bounds=False,
-                                          switches_off=False)}
+                                          switches_off=False),
+                  "size_exponent": Parameter("1", 0.0, 1.0, 0.0, False, "how the excess grows with the cane's own "
+                                             "diameter: 0 one collar for every cane, 1 a share of the diameter",
+                                             minimum=0.0, switches_off=False, physical_bounds=False, refined=True)}
     #: a collar is its cane's: discovery asks whether the excess differs between canes
     scopes = ("global", "per_cane")
 
     def diameter(self, s: np.ndarray, d: np.ndarray) -> np.ndarray:
-        return d + 1e-3 * self.p["excess_mm"] * np.exp(-np.asarray(s) / (1e-3 * self.p["length_mm"]))
+        excess = 1e-3 * self.p["excess_mm"] * np.exp(-np.asarray(s) / (1e-3 * self.p["length_mm"]))
+        q = self.p["size_exponent"]
+        if q != 0.0:  # at 0 exactly the absolute collar (bit for bit: the fits that never free q)
+            # a line that reaches zero far beyond the push (toward the tip) is floored later anyway
+            excess = excess * (np.maximum(np.asarray(d, float), 1e-6) / self.D_REF_M) ** q
+        return d + excess
 
 
 class ProbeMisalignment(Effect):
