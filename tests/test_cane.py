@@ -78,6 +78,11 @@ def test_a_key_given_twice_is_an_error_not_the_last_one_kept(tmp_path: Path):
     assert yaml.safe_load(p.read_text())["calipers"][0]["diameter"] == 0.02  # what PyYAML alone does
     with pytest.raises(InputError, match="twice.yaml.*key 'calipers' given twice"):
         load_cane(p)
+    # a key that overrides a merged one (YAML's <<) is no duplicate; equal keys in two mappings neither
+    from canebench.data.strict_yaml import load_yaml
+
+    assert load_yaml("b: &b {a: 1, c: 2}\nx: {<<: *b, c: 3}\n")["x"] == {"a": 1, "c": 3}
+    assert load_yaml("- {a: 1}\n- {a: 2}\n") == [{"a": 1}, {"a": 2}]
     # one sentence alone is a list of one
     one = {**GOOD, "provenance": {"assumptions": "straight cane"}}
     assert cane_from_dict(one, "x").provenance["assumptions"] == ["straight cane"]

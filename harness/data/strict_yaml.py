@@ -21,9 +21,12 @@ class _StrictLoader(yaml.SafeLoader):
 
 
 def _mapping(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
-    loader.flatten_mapping(node)  # merge keys (<<) first: an override by a merge is not a duplicate
+    # only the keys written in this mapping: one that overrides a merged one (<<) is YAML's way to
+    # override, not a duplicate, so the check runs before the merge is flattened in
     seen: dict[Any, Any] = {}
     for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            continue
         key = loader.construct_object(key_node, deep=deep)
         try:
             hash(key)
@@ -34,6 +37,7 @@ def _mapping(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = False) 
                                     f"key {key!r} given twice (first on line {seen[key].line + 1})",
                                     key_node.start_mark)
         seen[key] = key_node.start_mark
+    loader.flatten_mapping(node)
     return loader.construct_mapping(node, deep=deep)
 
 
