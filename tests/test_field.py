@@ -265,3 +265,23 @@ def test_a_trace_longer_than_the_simulated_push_is_scored_over_the_push(tmp_path
     short = load_dataset(_write_long_trial(tmp_path / "short", 40.0))
     fs = field_stage(short)[short[0].id]
     assert fs.k == extract_field_stiffness(read_rig_csv(short[0].csv)).k_n_per_mm
+
+
+@pytest.mark.parametrize("scale,warned", [(1.0, None), (10.0, "look scaled"), (1e-3, "looks like metres")])
+def test_positions_in_another_unit_are_warned_about(tmp_path, scale, warned):
+    """The rig steps 0.5 mm: positions ten times that (an input review's x10 file, whose slope came out
+    ten times too soft, session 66) or a thousandth of it warn, naming the file and column."""
+    import warnings
+
+    from canebench.errors import InputWarning
+
+    rows = [f"{i + 2},{500 * i},{-50.0 + max(0, i - 5) * 3.0},{(100 + 0.5 * i) * scale},700" for i in range(40)]
+    p = _write(tmp_path, HEADER + "\n".join(rows) + "\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        read_rig_csv(p)
+    got = [str(w.message) for w in caught if issubclass(w.category, InputWarning)]
+    if warned is None:
+        assert got == []
+    else:
+        assert len(got) == 1 and warned in got[0] and "Displacement (mm)" in got[0] and str(p) in got[0], got

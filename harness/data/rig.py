@@ -105,4 +105,7 @@ def read_rig_csv(path: str | Path) -> RigTrial:
     if step < 0.01:
         warn_input(src, COLUMNS["disp"], f"median step {step:.3g} per sample: the rig steps 0.5 mm, so this "
                                          "looks like metres, not mm")
+    elif step > 2.5:  # five rig steps a sample: a displacement in another unit (or scaled) moves k as much
+        warn_input(src, COLUMNS["disp"], f"median step {step:.3g} mm per sample: the rig steps 0.5 mm, so the "
+                                         "positions look scaled (not mm?); the stiffness scales with them")
     return RigTrial(src, disp, force, (t - t0) / 1000.0, float(np.median(out["height"])))
