@@ -121,3 +121,24 @@ def test_a_record_too_short_to_score_is_unscored_not_failed(bundled_trials, tmp_
     res = run_trials([t2], ["pinocchio"], PROTOCOLS["fast"], PRESETS["default"], tmp_path / "run").to_df()
     assert list(res.status) == ["unscored"], res[["status", "reason", "field_reason"]]
     assert res.reason[0].startswith("no field stiffness: ") and res.field_reason[0] in res.reason[0]
+
+
+def test_a_rig_file_of_another_height_is_warned_about(bundled_trials, tmp_path):
+    """The rig writes the push height into every row; a file whose height is not push_points.csv's
+    (another trial's, by a mistyped name) warns, naming the file, the column and the trial."""
+    import dataclasses
+    import warnings
+
+    from canebench.errors import InputWarning
+    from canebench.execute.pipeline import field_fit_for
+
+    t = bundled_trials[0]
+    other = next(o for o in bundled_trials if abs(o.height_mm - t.height_mm) > 50)
+    for trial, warned in ((t, False), (dataclasses.replace(t, csv=other.csv), True)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            field_fit_for(trial)
+        got = [str(w.message) for w in caught if issubclass(w.category, InputWarning)]
+        assert bool(got) == warned, got
+        if warned:
+            assert str(other.csv) in got[0] and "Height (mm)" in got[0] and t.id in got[0]

@@ -25,7 +25,7 @@ import pandas as pd
 
 from ..data.dataset import Trial
 from ..data.rig import read_rig_csv
-from ..errors import InputError
+from ..errors import InputError, warn_input
 from ..measure.field import FieldFit, extract_field_stiffness
 from ..model.chain import build_chain
 from ..model.config import ModelConfig
@@ -111,11 +111,20 @@ def trial_assumptions(trial: Trial, config: ModelConfig) -> str:
 SIM_TRAVEL_MM = Protocol.max_steps * Protocol.step_m * 1e3
 
 
+#: how far the rig file's push height may lie from push_points.csv's (tape and rounding)
+RIG_HEIGHT_TOL_MM = 10.0
+
+
 def field_fit_for(trial: Trial, window_mm: float | None = None, record_end_mm: float | None = None) -> FieldFit | None:
     """The field fit of one trial's rig record, cut at ``record_end_mm`` of travel (an effect's)."""
     if trial.csv is None or not trial.csv.exists():
         return None
     rig = read_rig_csv(trial.csv)
+    if abs(rig.height_mm - trial.height_mm) > RIG_HEIGHT_TOL_MM:
+        # the rig writes the push height into every row: another trial's file (a mistyped name in
+        # push_points.csv) would otherwise be scored as this one without a word
+        warn_input(str(trial.csv), "Height (mm)", f"{rig.height_mm:g} mm, where push_points.csv gives "
+                                                  f"{trial.height_mm:g} mm for trial {trial.id}: is it this trial's file?")
     if record_end_mm is not None:
         rig = rig.up_to(record_end_mm)
     return extract_field_stiffness(rig, window_mm=window_mm, max_travel_mm=SIM_TRAVEL_MM)
