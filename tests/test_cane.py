@@ -131,3 +131,28 @@ def test_config_overrides_are_typed_and_validated():
     for bad in ("-0.1", "nan"):
         with pytest.raises(InputError, match="probe_tangent_window_m"):
             ModelConfig().with_overrides({"probe_tangent_window_m": bad})
+
+
+def test_a_height_an_arched_cane_reaches_twice_is_warned_about():
+    """An arch reaches a height on the way up and on the way down; the first crossing is taken, so a
+    push meant for the far limb would be scored on the near one (3 times stiffer in an input review's
+    case). A height given so warns with both arc lengths; the same place given by s does not."""
+    import warnings
+
+    from canebench.errors import InputWarning
+
+    arch = copy.deepcopy(GOOD)
+    arch["polyline"] = {"raw": False, "points": [[0, 0, 0], [0, 0, 0.9], [0.3, 0, 1.2], [0.6, 0, 0.9], [0.7, 0, 0.5]]}
+    arch["push_points"] = [{"id": "1", "height": 1.0, "direction": [0, 1, 0]}]
+
+    def warned(d):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            cane_from_dict(d, "arch.yaml")
+        return [str(w.message) for w in caught if issubclass(w.category, InputWarning) and "reached at" in str(w.message)]
+
+    got = warned(arch)
+    assert len(got) == 1 and "push_points[0].height" in got[0] and "arch.yaml" in got[0], got
+    arch["push_points"] = [{"id": "1", "s": 1.9, "direction": [0, 1, 0]}]
+    assert warned(arch) == []
+    assert warned(GOOD) == []

@@ -285,6 +285,7 @@ def _check_extent(cane: CaneDescription) -> None:
     zmin, zmax = float(pts[:, 2].min()), float(pts[:, 2].max())
     for i, c in enumerate(cane.calipers):
         _extent_error(cane, f"calipers[{i}]", c.where, length, zmin, zmax)
+    _warn_ambiguous_heights(cane, pts)
     for i, p in enumerate(cane.push_points):
         _extent_error(cane, f"push_points[{i}]", p.where, length, zmin, zmax)
         # a push at the clamp deflects nothing: every engine would fail on it, each in its own words
@@ -293,6 +294,26 @@ def _check_extent(cane: CaneDescription) -> None:
             fld, v = ("s", w.s) if w.s is not None else ("height", w.height)
             raise InputError(cane.source, f"push_points[{i}].{fld}", f"{v:.4g} m is at the clamped base (within "
                                                                      "1 mm): a push there deflects nothing")
+
+
+def _warn_ambiguous_heights(cane: CaneDescription, pts: np.ndarray) -> None:
+    """Warn where a height names more than one place: an arched cane reaches it on the way up and on
+    the way down, and the first crossing is taken (an input review found the far limb's push 3 times
+    softer, taken silently). Crossings within 5 cm of arc (a digitized wiggle) count as one place."""
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    z = pts[:, 2]
+    places = [*((f"calipers[{i}]", c.where) for i, c in enumerate(cane.calipers)),
+              *((f"push_points[{i}]", p.where) for i, p in enumerate(cane.push_points))]
+    for fld, w in places:
+        if w.height is None:
+            continue
+        d = z - w.height
+        k = np.nonzero(d[:-1] * d[1:] < 0)[0]
+        at = s[k] + d[k] / (d[k] - d[k + 1]) * (s[k + 1] - s[k])
+        if len(at) > 1 and at.max() - at.min() > 0.05:
+            warn_input(cane.source, f"{fld}.height", f"{w.height:.4g} m is reached at s = "
+                       + ", ".join(f"{v:.3f}" for v in at[:4]) + f" m along the cane; the first ({at[0]:.3f} m) is "
+                       "taken: give s (arc length) to choose")
 
 
 def _check_plausible(cane: CaneDescription) -> None:
