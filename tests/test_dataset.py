@@ -142,3 +142,30 @@ def test_a_rig_file_of_another_height_is_warned_about(bundled_trials, tmp_path):
         assert bool(got) == warned, got
         if warned:
             assert str(other.csv) in got[0] and "Height (mm)" in got[0] and t.id in got[0]
+
+
+def test_push_points_pair_with_trials_by_number(tmp_path):
+    """push_points.csv's trial number names the push point whose id is that number ("1"), or the one
+    id ending in it ("t1", "T01"): a blind test bed wrote "t1" and every set was refused (session 66).
+    Two ids ending in the number, or none, stay an error naming the file and field."""
+    import shutil
+
+    import yaml
+
+    from canebench.data.dataset import bundled_dataset
+    from canebench.errors import InputError
+
+    d = tmp_path / "ds"
+    shutil.copytree(bundled_dataset(), d)
+    y = d / "canes" / "b1c1.yaml"
+    doc = yaml.safe_load(y.read_text())
+    before = {t.id: t.cane.push_point(t.push_id).where for t in load_dataset(d) if t.cane.id == "b1c1"}
+    for p in doc["push_points"]:
+        p["id"] = f"T0{p['id']}"
+    y.write_text(yaml.safe_dump(doc))
+    after = {t.id: (t.push_id, t.cane.push_point(t.push_id).where) for t in load_dataset(d) if t.cane.id == "b1c1"}
+    assert {k: v[1] for k, v in after.items()} == before and after["b1c1t2"][0] == "T02"
+    doc["push_points"][1]["id"] = "x1"  # now "T01" and "x1" both end in 1, and nothing in 2
+    y.write_text(yaml.safe_dump(doc))
+    with pytest.raises(InputError, match=r"b1c1.yaml: field 'push_points'.*trial b1c1t1.*T01, x1 all end in 1"):
+        load_dataset(d)

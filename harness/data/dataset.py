@@ -12,6 +12,7 @@ assumption is carried into every output.
 from __future__ import annotations
 
 import fnmatch
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -103,6 +104,21 @@ def straight_cane(bush: int, cane: int, rows: pd.DataFrame, source: str) -> Cane
     return cane_from_dict(data, source)
 
 
+def push_point_for(desc: CaneDescription, trial: int, tid: str, pp_src: str) -> str:
+    """The id of the push point that trial number ``trial`` of push_points.csv probes: the id equal to
+    the number ("1"), else the one id whose number it ends in ("t1", "T01", "push-1"): the format
+    documents pair them by number, and a blind test bed's "t1" ids were refused (session 66)."""
+    ids = [p.id for p in desc.push_points]
+    if str(trial) in ids:
+        return str(trial)
+    ends = [i for i in ids if (m := re.search(r"(\d+)$", i)) and int(m.group(1)) == trial]
+    if len(ends) == 1:
+        return ends[0]
+    why = f"ids {', '.join(ends)} all end in {trial}" if ends else f"its ids are {', '.join(ids)}"
+    raise InputError(desc.source, "push_points", f"no push point for trial {tid} of {pp_src} (trial {trial}): "
+                                                 f"{why}; give the push point the id '{trial}'")
+
+
 def load_dataset(directory: str | Path, select: str | None = None) -> list[Trial]:
     """All trials of a dataset directory, optionally filtered by glob(s).
 
@@ -145,10 +161,8 @@ def load_dataset(directory: str | Path, select: str | None = None) -> list[Trial
         desc = descriptions.get(cid) or straight_cane(int(bush), int(cane), rows, pp_src)
         for r in rows.itertuples():
             tid = f"{cid}t{int(r.trial)}"
-            if str(int(r.trial)) not in {p.id for p in desc.push_points}:
-                raise InputError(desc.source, "push_points", f"no push point with id '{int(r.trial)}' for trial "
-                                                             f"{tid} of {pp_src}")
-            trials.append(Trial(tid, desc, str(int(r.trial)), (d / str(r.file)).resolve(), int(bush), int(cane),
+            pid = push_point_for(desc, int(r.trial), tid, pp_src)
+            trials.append(Trial(tid, desc, pid, (d / str(r.file)).resolve(), int(bush), int(cane),
                                 int(r.trial), float(r.height_mm), float(r.diameter_mm)))
     if select:
         pats = [p.strip() for p in select.split(",") if p.strip()]
