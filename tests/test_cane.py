@@ -156,3 +156,16 @@ def test_a_height_an_arched_cane_reaches_twice_is_warned_about():
     arch["push_points"] = [{"id": "1", "s": 1.9, "direction": [0, 1, 0]}]
     assert warned(arch) == []
     assert warned(GOOD) == []
+
+
+def test_a_push_near_a_drooping_tip_is_not_taken_for_the_clamp():
+    """The clamp check resolves a push height to where the chain takes it (the first crossing), not
+    to the lowest point: a tip that droops below the base is pushed far from the clamp."""
+    droop = copy.deepcopy(GOOD)
+    droop["polyline"] = {"raw": False, "points": [[0, 0, 0.05], [0, 0, 0.9], [0.4, 0, 1.1], [0.8, 0, 0.0]]}
+    droop["calipers"] = [{"s": 0.3, "diameter": 0.010}, {"s": 0.9, "diameter": 0.008}]
+    droop["push_points"] = [{"id": "1", "s": 1.9, "direction": [0, 1, 0]}]
+    cane_from_dict(droop, "droop.yaml")  # near the tip, below the base's height: fine
+    droop["push_points"] = [{"id": "1", "height": 0.05, "direction": [0, 1, 0]}]
+    with pytest.raises(InputError, match=r"push_points\[0\]\.height.*clamped base"):
+        cane_from_dict(droop, "droop.yaml")

@@ -172,6 +172,9 @@ def test_model_file_round_trip_and_bad_files(tmp_path):
            "config: {modulus_pa: true}": "modulus_pa", "preset: [paper]": "preset",
            "effects: [{effect: probe_misalignment, params: {angle_deg: 1.0e6}}]": "angle_deg",
            "effects: [{effect: obstruction, params: {onset_mm: -5}}]": "onset_mm",
+           # the probe's pitch is the configuration's plus the effect's
+           "config: {probe_angle_deg: 60}\neffects: [{effect: probe_misalignment, params: {angle_deg: 60}}]": "angle_deg",
+           "effects: [{effect: probe_misalignment, params: {angle_deg: 89}}]": "angle_deg",
            # a key given twice: PyYAML keeps the last without a word
            "effects: [{effect: root_compliance, params: {k_root: 120, k_root: 5}}]": "given twice"}
     for text, field in bad.items():
@@ -184,7 +187,10 @@ def test_model_file_round_trip_and_bad_files(tmp_path):
 
     for text, warned in (("{effect: modulus_scale, params: {scale: 50}}", True),
                          ("{effect: rig_compliance, params: {k_rig: 1.0e-6}}", True),
-                         ("{effect: modulus_scale, params: {scale: 1.2}}", False)):
+                         ("{effect: modulus_scale, params: {scale: 1.2}}", False),
+                         # a spring stiffer than its search bound is nearer rigid, no implausible plant
+                         ("{effect: rig_compliance, params: {k_rig: 1.0e6}}", False),
+                         ("{effect: root_compliance, params: {k_root: 1.0e4}}", False)):
         (tmp_path / "w.yaml").write_text(f"effects: [{text}]")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

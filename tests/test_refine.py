@@ -19,7 +19,7 @@ def test_flare_size_exponent_spans_a_fixed_collar_and_a_share_of_the_diameter():
     s = np.linspace(0.0, 0.6, 13)
     d = np.linspace(0.024, 0.009, 13)
     e, ell = 6.0e-3, 0.12
-    absolute = d + e * np.exp(-s / ell)
+    absolute = d + 1e-3 * 6.0 * np.exp(-s / (1e-3 * 120.0))  # the expression before session 66, as it was
     assert np.array_equal(flare(excess_mm=6.0, length_mm=120.0).diameter(s, d), absolute)
     share = d * (1.0 + (e / 0.010) * np.exp(-s / ell))
     np.testing.assert_allclose(flare(excess_mm=6.0, length_mm=120.0, size_exponent=1.0).diameter(s, d), share,
@@ -102,9 +102,9 @@ def test_a_flare_that_grows_with_the_cane_is_refined(bundled_screen):
     assert r.adopted and r.p < REFINE_ALPHA / 100 and r.cv_loss_refined < r.cv_loss_selected
     assert calls == [(("base_flare", "size_exponent"),)]
     q = dict(next(s for s in cv2.fit.specs if s.name == "base_flare").params)["size_exponent"]
-    assert q == r.value_adopted and q > 0.7, r
-    # the likelihood ratio is the two fits' own (their -log likelihoods, calipers' penalty included)
-    assert r.lr == pytest.approx(2 * (cv.fit.nll - cv2.fit.nll), rel=1e-9)
+    assert q > 0.7, r
+    # what it is for: the canes left out are predicted better (the held-out residual's median |ln|)
+    assert np.median(np.abs(cv2.residual)) < 0.8 * np.median(np.abs(cv.residual))
 
 
 def test_a_fixed_collar_is_seldom_refined(bundled_screen):
@@ -128,6 +128,38 @@ def test_a_fixed_collar_is_seldom_refined(bundled_screen):
             assert cv2 is cv and calls == [] and math.isnan(r.value_adopted)
     assert adopted <= 2
     assert lower >= 5  # the fit does move q: the test, not the fitter, keeps it at 0
+
+
+def test_refits_after_a_refinement_keep_it_and_drop_what_it_made_stale(bundled_screen):
+    """A share-of-diameter flare (16 mm at 10 mm over 150 mm) alone hidden: with q held at 0 the
+    selection adds a modulus scale to make up for the thick canes; once q is adopted the scale changes
+    the model by less than MIN_CHANGE and the backward pass (which the workflow runs after an adoption)
+    drops it, its refits keeping q free (an independent review found the scale left named, seed 3).
+    The engine's re-anchoring keeps q too (a stand-in engine whose runs equal the screen)."""
+    from types import SimpleNamespace
+
+    from canebench.discovery import engine_runs
+    from canebench.discovery.refine import refine
+    from canebench.discovery.screenset import Anchored
+    from canebench.discovery.selection import MIN_CHANGE, backward, forward_select
+    from canebench.model.effects import EffectSpec
+
+    ss, lkb, inv = bundled_screen
+    at = Anchored(ss, lkb)
+    lkf = at.predict((EffectSpec.parse("base_flare(excess_mm=16, length_mm=150, size_exponent=1)"),)) + _scatter(inv, 3)
+    ident = lambda a, c: (a, c)  # noqa: E731
+    sel = forward_select(("modulus_scale", "root_compliance", "rig_compliance", "base_flare"), at, lkf, ident, 0.05, 3,
+                         MIN_CHANGE, 0)
+    assert set(sel.current) == {"base_flare", "modulus_scale"}, sel.current
+    cv, at2, (r,) = refine(sel.cv, sel.at, lkf, ident)
+    assert r.adopted
+    current, cv2, _, dropped = backward(sel.current, (), cv, at2, lkf, MIN_CHANGE, ident, [], 2)
+    assert current == ("base_flare",) and dropped == ["modulus_scale"]
+    assert cv2.fit.candidate.refined == (("base_flare", "size_exponent"),)
+    engine = SimpleNamespace(backend="screen", log_k=lambda specs, label: at2.predict(tuple(specs)))
+    _, cv3 = engine_runs.reanchor(engine, at2, cv2, lkf, [], 1, 1)
+    assert cv3.fit.candidate.refined == (("base_flare", "size_exponent"),)
+    assert dict(cv3.fit.specs[0].params)["size_exponent"] > 0.7
 
 
 @pytest.mark.heavy

@@ -245,7 +245,7 @@ def cane_from_dict(data: Any, source: str = "<memory>") -> CaneDescription:
     if "assumptions" in prov:
         # each a sentence every result from this cane carries; one sentence alone is a list of one
         a = prov["assumptions"]
-        a = [a] if isinstance(a, str) else a
+        a = [] if a is None else [a] if isinstance(a, str) else a
         if not (isinstance(a, list) and all(isinstance(x, str) for x in a)):
             raise InputError(src, "provenance.assumptions", f"expected a list of sentences (text), got {a!r}")
         prov = {**prov, "assumptions": a}
@@ -290,10 +290,22 @@ def _check_extent(cane: CaneDescription) -> None:
         _extent_error(cane, f"push_points[{i}]", p.where, length, zmin, zmax)
         # a push at the clamp deflects nothing: every engine would fail on it, each in its own words
         w = p.where
-        if (w.s is not None and w.s < 1e-3) or (w.height is not None and w.height < zmin + 1e-3):
+        # (by height: where the first crossing, which the chain takes, lies; not the lowest point, which a
+        # drooping tip may be)
+        if (w.s is not None and w.s < 1e-3) or (w.height is not None and s_at(pts, w.height) < 1e-3):
             fld, v = ("s", w.s) if w.s is not None else ("height", w.height)
             raise InputError(cane.source, f"push_points[{i}].{fld}", f"{v:.4g} m is at the clamped base (within "
                                                                      "1 mm): a push there deflects nothing")
+
+
+def s_at(pts: np.ndarray, height: float) -> float:
+    """The first arc length along the polyline ``pts`` at which it reaches ``height`` (inf: never)."""
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    d = pts[:, 2] - height
+    if d[0] == 0:
+        return 0.0
+    k = np.nonzero(d[:-1] * d[1:] <= 0)[0]
+    return float(s[k[0]] + d[k[0]] / (d[k[0]] - d[k[0] + 1]) * (s[k[0] + 1] - s[k[0]])) if len(k) else math.inf
 
 
 def _warn_ambiguous_heights(cane: CaneDescription, pts: np.ndarray) -> None:

@@ -23,7 +23,12 @@ def _left_out(canes: list[str]) -> str:
 def rivals_text(named: dict[str, Any]) -> str:
     """``barely ahead of X: BIC +0.71`` for a name in ``discovery.json`` won by less than
     :data:`.selection.CLOSE_BIC` (its ``close_rivals``), else ``""``."""
-    r = ", ".join(f"{c['candidate']}: BIC +{c['bic_above']:.2f}" for c in named.get("close_rivals") or [])
+    rivals = named.get("close_rivals") or []
+    by_shape = [c for c in rivals if c.get("decided_by")]
+    if by_shape:  # named against the BIC, by the traces' shape (.tiebreak)
+        return "named over " + ", ".join(f"{c['candidate']} (BIC {-c['bic_above']:.2f} lower) by the traces' shape"
+                                         for c in by_shape)
+    r = ", ".join(f"{c['candidate']}: BIC +{c['bic_above']:.2f}" for c in rivals)
     return f"barely ahead of {r}" if r else ""
 
 

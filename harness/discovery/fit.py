@@ -112,6 +112,13 @@ class Candidate:
         """The refinement parameters this candidate fits (:mod:`.refine`)."""
         return tuple((n, p) for n, p in self.free if EFFECTS[n].parameters[p].refined)
 
+    @classmethod
+    def like(cls, names: tuple[str, ...], model: Any) -> "Candidate":
+        """``names`` with the refinements ``model`` (a :class:`CVResult`, :class:`Fit` or candidate) fits
+        for those of its effects among them: a refit after a refinement keeps it."""
+        cand = getattr(getattr(model, "fit", model), "candidate", model)
+        return cls.of(tuple(names), tuple(r for r in cand.refined if r[0] in names))
+
     def to_internal(self, values: dict[tuple[str, str], float]) -> np.ndarray:
         out = []
         for n, p in self.free:
@@ -339,7 +346,9 @@ def _fitted_directions(at: Anchored, fixed: tuple[EffectSpec, ...], base: np.nda
     names = tuple(sp.name for sp in fixed)
     if not names:
         return np.zeros((len(base), 0))
-    cand = Candidate.of(names)
+    # a refinement the fixed model carries (a flare's size exponent it fits) is one of its directions too
+    held = tuple((sp.name, k) for sp in fixed for k, _ in sp.params if EFFECTS[sp.name].parameters[k].refined)
+    cand = Candidate.of(names, held)
     x0 = cand.to_internal({(sp.name, k): v for sp in fixed for k, v in sp.params})
     cols = []
     for j in range(len(x0)):

@@ -46,7 +46,8 @@ class Refinement:
     parameter: str
     #: the refitted value (on the selected model's anchor, before any re-anchoring)
     value: float
-    #: 2 (nll selected - nll refined); nll includes the calipers' penalty of a diameter effect
+    #: 2 (nll selected - nll refined); nll includes the calipers' penalty of a diameter effect, and the
+    #: selected model's is the better of its fit and its refit from the refined optimum
     lr: float
     p: float
     #: summed held-out -log density over the canes: selected model, refined model
@@ -101,7 +102,13 @@ def refine(cv_cur: CVResult, at: Anchored, lkf: np.ndarray,
         values = {(sp.name, k): v for sp in cv_cur.fit.specs for k, v in sp.params}
         values[(n, p)] = EFFECTS[n].parameters[p].null
         fit = fit_candidate(cand, at, lkf, x0=cand.to_internal(values))
-        lr = max(0.0, 2.0 * (cv_cur.fit.nll - fit.nll))
+        # the null refitted from the refined optimum too: a better basin of the other parameters that
+        # the refined fit found is not the refinement's credit
+        sel = cv_cur.fit.candidate
+        back = fit_candidate(sel, at, lkf, x0=sel.to_internal({(sp.name, k): v for sp in fit.specs
+                                                               for k, v in sp.params if (sp.name, k) in sel.free}))
+        nll0 = min(cv_cur.fit.nll, back.nll)
+        lr = max(0.0, 2.0 * (nll0 - fit.nll))
         pv = float(stats.chi2.sf(lr, 1))
         value = dict(next(sp for sp in fit.specs if sp.name == n).params)[p]
         cv = cross_validate(cand, at, lkf, full=fit) if pv < alpha else None

@@ -272,7 +272,7 @@ def stalest(current: tuple[str, ...], eligible: tuple[str, ...], cv_cur: Any, at
     """The effect in ``eligible`` whose removal from ``current`` (the others refitted) changes the model least."""
     best: dict[str, Any] = {}
     for name in eligible:
-        fit = fit_candidate(Candidate.of(tuple(c for c in current if c != name)), at, lkf)
+        fit = fit_candidate(Candidate.like(tuple(c for c in current if c != name), cv_cur), at, lkf)
         net = _net_change(at, fit.specs, cv_cur.fit.specs)
         if not best or net < best["net"]:
             best = {"name": name, "net": net, "fit": fit}
@@ -306,7 +306,7 @@ def backward(current: tuple[str, ...], protect: tuple[str, ...], cv_cur: Any, at
                       "params": {s.name: dict(s.params) for s in drop["fit"].specs}, "chosen": True,
                       "removed": drop["name"]})
         dropped.append(drop["name"])
-        cv_cur = cross_validate(Candidate.of(current), at, lkf, full=drop["fit"])  # at hand
+        cv_cur = cross_validate(Candidate.like(current, cv_cur), at, lkf, full=drop["fit"])  # at hand
         at, cv_cur = reanchor(at, cv_cur)
     return current, cv_cur, at, dropped
 
@@ -372,7 +372,7 @@ def drop_unsupported(current: tuple[str, ...], entered: tuple[tuple[str, ...], .
         groups = _prune(groups, gone)
         if current:
             # the stalest search already fitted the model without ``name`` alone
-            cv_cur = cross_validate(Candidate.of(current), at, lkf,
+            cv_cur = cross_validate(Candidate.like(current, cv_cur), at, lkf,
                                     full=least.get("fit") if gone == (name,) else None)
         else:
             at, cv_cur = at_empty()

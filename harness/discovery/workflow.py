@@ -116,11 +116,13 @@ from .contacts import FieldContacts, read_contacts
 from .fit import bootstrap_ci
 from .nulls import ci_of
 from .per_cane import PER_CANE_ALPHA, Cov2, PerCaneTest, per_cane_test, varying_parameter
+from .nulls import covers_null
 from .refine import refine
+from .tiebreak import shape_tie_break
 from .screenset import Anchored, ScreenSet
-from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, drop_unsupported, forward_select
+from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, backward, drop_unsupported, forward_select
 from .structure import between_share
-from .verdict import INADEQUATE, judge
+from .verdict import ADEQUACY_ALPHA, INADEQUATE, judge
 
 BASELINES = {
     "beam": ("beam", "beam-consistent", "the converged geometrically exact beam (stated modulus, caliper-fit taper)"),
@@ -166,6 +168,8 @@ class DiscoveryResult:
     per_cane: dict[str, PerCaneTest] = field(default_factory=dict)
     #: the refinements tried on the selected model (:func:`.refine.refine`), adopted or not
     refinements: list[dict[str, Any]] = field(default_factory=list)
+    #: a close call between a scale and a pitch put to the traces' shape (:mod:`.tiebreak`), or None
+    shape_tie: dict[str, Any] | None = None
 
     def model_file_config(self) -> ModelConfig:
         """The fitted model as ``model.yaml`` holds it: :attr:`config` (what the engines confirmed,
@@ -193,6 +197,7 @@ class DiscoveryResult:
         return {"baseline": self.baseline, "named": self.named, "unexplained": bool(self.unexplained),
                 "partial": self.partial, "unsupported": self.unsupported,
                 "too_small_to_name": self.too_small_to_name, "refinements": self.refinements,
+                "shape_tie": self.shape_tie,
                 "gap": self.gap, "trials": tr,
                 "stop_reason": self.stop_reason,
                 "notes": self.notes,
@@ -396,6 +401,27 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     current, cv_cur, at, steps, stop = sel.current, sel.cv, sel.at, sel.steps, sel.stop
     timing["selection_s"] = time.perf_counter() - t3
 
+    # -- refinements of the selected effects' forms (a flare that grows with the cane): an adopted one
+    # can leave an effect selected to make up for the form held fixed with nothing to do, so the
+    # backward pass runs again (every refit keeps the refinement: .selection passes it on)
+    refinements: list[dict[str, Any]] = []
+    if current:
+        t_r = time.perf_counter()
+        cv_cur, at, tried = refine(cv_cur, at, lkf, lambda at_, cv_: reanchor(at_, cv_))
+        refinements = [r.to_dict() for r in tried]
+        notes.extend(r.note() for r in tried)
+        if any(r.adopted for r in tried):
+            steps.append({"step": len(current), "model": "+".join(current), "candidate": "refined: " + ", ".join(
+                f"{r.effect}.{r.parameter}" for r in tried if r.adopted), "bic": cv_cur.fit.bic,
+                "params": {sp.name: dict(sp.params) for sp in cv_cur.fit.specs}, "chosen": True})
+            current, cv_cur, at, gone = backward(current, (), cv_cur, at, lkf, min_change,
+                                                 lambda at_, cv_: reanchor(at_, cv_), steps, len(current))
+            if gone:
+                notes.append("stale once the refinement was adopted, dropped: " + ", ".join(gone))
+                sel.entered[:] = [g2 for g in sel.entered if (g2 := tuple(c for c in g if c not in gone))]
+                sel.close_calls[:] = [cc for cc in sel.close_calls if not set(cc["chosen"]) & set(gone)]
+        timing["refine_s"] = time.perf_counter() - t_r
+
     # -- intervals, and the names they do not support
     t4 = time.perf_counter()
 
@@ -410,19 +436,32 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         stop += "; not named, for an interval that reaches no effect: " + ", ".join(
             u["effect"] + ("" if u["covers_null"] else f" (with {u['dropped_with']})") for u in unsupported)
 
-    # -- refinements of the selected effects' forms (a flare that grows with the cane), then their intervals
-    refinements: list[dict[str, Any]] = []
+    # -- a close call between a modulus scale and a pitch, decided by the traces' shape (.tiebreak)
+    def shape_of(specs, level):
+        return engine_runs.model_shape_check(engine, run, specs, seed, level)
+
+    shape_tie = None
     if current:
-        t_r = time.perf_counter()
-        cv_cur, at, tried = refine(cv_cur, at, lkf, lambda at_, cv_: reanchor(at_, cv_))
-        refinements = [r.to_dict() for r in tried]
-        notes.extend(r.note() for r in tried)
-        if any(r.adopted for r in tried):
-            ci = draw_ci(cv_cur.fit, at)
-            steps.append({"step": len(current), "model": "+".join(current), "candidate": "refined: " + ", ".join(
-                f"{r.effect}.{r.parameter}" for r in tried if r.adopted), "bic": cv_cur.fit.bic,
-                "params": {sp.name: dict(sp.params) for sp in cv_cur.fit.specs}, "chosen": True})
-        timing["refine_s"] = time.perf_counter() - t_r
+        t_s = time.perf_counter()
+        alt, cv_t, at_t, shape_tie = shape_tie_break(current, sel.close_calls, cv_cur, at, at_empty, lkf, shape_of,
+                                                     lambda at_, cv_: reanchor(at_, cv_), ADEQUACY_ALPHA)
+        if shape_tie is not None and shape_tie.swapped:
+            ci_t = draw_ci(cv_t.fit, at_t)
+            if covers_null(next(sp for sp in cv_t.fit.specs if sp.name == shape_tie.rival), ci_t):
+                shape_tie.swapped, shape_tie.why = False, f"the {shape_tie.rival}'s interval reaches no effect"
+            else:
+                current, cv_cur, at, ci = alt, cv_t, at_t, ci_t
+                for cc in sel.close_calls:  # the close call now reads the other way
+                    if cc["chosen"] == (shape_tie.chosen,):
+                        cc.update(chosen=(shape_tie.rival,), rivals=[(shape_tie.chosen, -shape_tie.bic_gap)],
+                                  by_shape=True)
+                steps.append({"step": len(current), "model": "+".join(current),
+                              "candidate": f"{shape_tie.chosen}->{shape_tie.rival} (trace shape)",
+                              "bic": cv_cur.fit.bic, "params": {sp.name: dict(sp.params) for sp in cv_cur.fit.specs},
+                              "chosen": True})
+        if shape_tie is not None:
+            notes.append(shape_tie.note())
+        timing["shape_tie_s"] = time.perf_counter() - t_s
 
     final = cv_cur
     r_before = lkf - lkb0
@@ -446,9 +485,6 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     timing["bootstrap_s"] = time.perf_counter() - t4
 
     # -- is it an explanation?
-    def shape_of(specs, level):
-        return engine_runs.model_shape_check(engine, run, specs, seed, level)
-
     verdict = judge(F, r_before, r_after, lkf, at0, at, final, current, candidates, unsupported, named,
                     cfg0.diameter_factor, shape_of, notes, timing, seed)
     named, partial, adequacy = verdict.named, verdict.partial, verdict.adequacy
@@ -493,7 +529,8 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
     result = DiscoveryResult(baseline, named, verdict.unexplained or sel.too_small is not None, gap, feats,
                              pd.DataFrame(steps), verdict.structure_before, verdict.structure_after, model, engines,
                              stop, notes, timing, anchors, adequacy, partial, partial_config,
-                             pitch_table, unsupported, sel.too_small, per_cane, refinements)
+                             pitch_table, unsupported, sel.too_small, per_cane, refinements,
+                             shape_tie.to_dict() if shape_tie is not None else None)
     result.notes.append(f"baseline: {base_text}")
     if any(t.cane.provenance.get("assumptions") for t in trials):
         for a in dict.fromkeys(a for t in trials for a in t.cane.provenance.get("assumptions", [])):
@@ -702,7 +739,11 @@ def mark_close_calls(named: list[dict], close_calls: list[dict]) -> list[str]:
         if not kept or not rivals:
             continue
         for n in kept:
-            n["close_rivals"] = [{"candidate": c, "bic_above": float(d)} for c, d in rivals]
+            n["close_rivals"] = [{"candidate": c, "bic_above": float(d), **({"decided_by": "trace shape"}
+                                                                            if cc.get("by_shape") else {})}
+                                 for c, d in rivals]
+        if cc.get("by_shape"):
+            continue  # named against the BIC by the traces' shape: the tie-break's note says so
         notes.append(f"{'+'.join(cc['chosen'])} was chosen at step {cc['step']} by the lowest BIC, but "
                      + ", ".join(f"{c} passed every rule too, only {d:.2f} above" for c, d in rivals)
                      + f" (under {CLOSE_BIC:g}: a Bayes factor under e, which the data barely support); read the "

@@ -120,11 +120,12 @@ def field_fit_for(trial: Trial, window_mm: float | None = None, record_end_mm: f
     if trial.csv is None or not trial.csv.exists():
         return None
     rig = read_rig_csv(trial.csv)
-    if abs(rig.height_mm - trial.height_mm) > RIG_HEIGHT_TOL_MM:
+    h = getattr(trial, "height_mm", math.nan)  # (a study's stand-in trial may carry only its file)
+    if math.isfinite(h) and abs(rig.height_mm - h) > RIG_HEIGHT_TOL_MM:
         # the rig writes the push height into every row: another trial's file (a mistyped name in
         # push_points.csv) would otherwise be scored as this one without a word
         warn_input(str(trial.csv), "Height (mm)", f"{rig.height_mm:g} mm, where push_points.csv gives "
-                                                  f"{trial.height_mm:g} mm for trial {trial.id}: is it this trial's file?")
+                                                  f"{h:g} mm for trial {trial.id}: is it this trial's file?")
     if record_end_mm is not None:
         rig = rig.up_to(record_end_mm)
     return extract_field_stiffness(rig, window_mm=window_mm, max_travel_mm=SIM_TRAVEL_MM)

@@ -170,6 +170,13 @@ class ModelConfig:
             raise InputError(source, "effects", f"an effect is listed twice: {', '.join(names)}")
         for e in self.effects:
             e.validate(source)
+            # the probe's pitch is the configuration's angle plus the effect's: the sum must stay off the axis
+            pitches = [(f"{e.name}{w}.angle_deg", dict(v)["angle_deg"]) for w, v in
+                       (("", e.params), *((f"[{k}]", v) for k, v in e.local)) if "angle_deg" in dict(v)]
+            for fld, a in pitches:
+                if not -89.0 < self.probe_angle_deg + a < 89.0:
+                    raise InputError(source, fld, f"{a:g} deg with probe_angle_deg {self.probe_angle_deg:g} pitches "
+                                                  f"the probe {self.probe_angle_deg + a:g} deg: must be within (-89, 89)")
 
         if self.stiffness_formula not in FORMULAS:
             import difflib

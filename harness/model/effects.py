@@ -551,7 +551,13 @@ class EffectSpec:
         for where, pairs in (("", self.params), *((f"[{k}]", v) for k, v in self.local)):
             for k, v in pairs:
                 par = cls.parameters.get(k)
-                if par is not None and par.physical_bounds and v != par.null and not par.low <= v <= par.high:
+                if par is None or not par.physical_bounds or v == par.null:
+                    continue
+                # the end on the null's side only stands for it (a spring's stiffest bound for rigid):
+                # beyond it the effect fades, which is no implausible plant
+                below = v < par.low and not par.null <= par.low
+                above = v > par.high and not par.null >= par.high
+                if below or above:
                     unit = "" if par.unit == "1" else f" {par.unit}"
                     warn_input(source, f"{self.name}{where}.{k}", f"{v:g}{unit} is outside {par.low:g} to "
                                f"{par.high:g}{unit}, the physically plausible range ({par.doc})")

@@ -86,12 +86,14 @@ def load_model_file(path: str | Path) -> ModelConfig:
                                  if k in ("effect", "name", "params", "local", "scope", "between_canes")},
                                 f"{src}: effects[{i}]")
         spec.validate(f"{src}: effects[{i}]")
-        spec.warn_implausible(f"{src}: effects[{i}]")
         specs.append(spec)
     try:
-        return cfg.replace(effects=tuple(specs))
+        out = cfg.replace(effects=tuple(specs))
     except InputError as exc:
         raise InputError(src, exc.field, exc.message) from None
+    for i, spec in enumerate(specs):  # a file refused is not warned about too
+        spec.warn_implausible(f"{src}: effects[{i}]")
+    return out
 
 
 def model_document(config: ModelConfig, preset: str = "default", ci95: dict[str, dict] | None = None,
