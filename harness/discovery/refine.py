@@ -38,8 +38,16 @@ from .screenset import Anchored
 REFINE_ALPHA = 0.01
 
 
+class JsonRecord:
+    """A dataclass record as ``discovery.json`` holds it (a value not finite as null: strict JSON)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                for k, v in asdict(self).items()}  # type: ignore[call-overload]
+
+
 @dataclass
-class Refinement:
+class Refinement(JsonRecord):
     """One refinement tried on the selected model."""
 
     effect: str
@@ -56,9 +64,6 @@ class Refinement:
     adopted: bool
     #: the value after re-anchoring (NaN where not adopted)
     value_adopted: float = math.nan
-
-    def to_dict(self) -> dict[str, Any]:
-        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(self).items()}
 
     def note(self) -> str:
         head = (f"{self.effect}'s {self.parameter} (held at {EFFECTS[self.effect].parameters[self.parameter].null:g} "

@@ -19,12 +19,13 @@ scale's model on average over 14 canes.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
 
 from .fit import Candidate, CVResult, cross_validate
+from .refine import JsonRecord
 from .screenset import Anchored
 
 #: the two effects a shape decides between (the only library effect that changes a trace's shape
@@ -37,7 +38,7 @@ SHAPE_TIE_MARGIN = 0.08
 
 
 @dataclass
-class ShapeTie:
+class ShapeTie(JsonRecord):
     """One close call the traces were asked to decide."""
 
     chosen: str
@@ -48,9 +49,6 @@ class ShapeTie:
     excess_rival: float
     swapped: bool
     why: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(self).items()}
 
     def note(self) -> str:
         head = (f"{self.chosen} won its step over {self.rival} by a BIC only {self.bic_gap:.2f} lower; the traces "
