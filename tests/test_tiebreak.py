@@ -114,8 +114,29 @@ def test_the_fourteenth_generators_pitch_is_named_by_its_traces(tmp_path):
     gen = tmp_path / "g14"
     shutil.copytree(src, gen)
     subprocess.run([sys.executable, "make.py", "05"], cwd=gen, check=True, capture_output=True)
-    res = discover(load_dataset(gen / "data" / "ds05"), confirm=False, n_boot=40, executor=make_executor("serial", 1))
+    res = discover(load_dataset(gen / "data" / "ds05"), confirm=False, executor=make_executor("serial", 1))
     assert [n["effect"] for n in res.named] == ["probe_misalignment"], (res.named, res.notes)
     assert res.shape_tie is not None and res.shape_tie["swapped"], res.shape_tie
     assert abs(res.named[0]["params"]["angle_deg"] - 38.0) < 0.2 * 38.0
+    lo, hi = res.named[0]["ci95"]["angle_deg"]
+    assert 0 < lo < 38.0 < hi  # of the size only: the traces fixed the sign (fold_pitch_sign)
     assert res.named[0]["close_rivals"][0]["decided_by"] == "trace shape"
+
+
+def test_the_pitch_draws_take_the_fitted_sign():
+    """Stiffness barely tells a pitch up from down: a resample on the mirror branch must not make the
+    interval span zero once the traces have fixed the sign; other parameters are untouched."""
+    from types import SimpleNamespace
+
+    from canebench.discovery.fit import Candidate
+    from canebench.discovery.tiebreak import fold_pitch_sign
+    from canebench.model.effects import EffectSpec
+
+    cand = Candidate.of(("root_compliance", "probe_misalignment"))
+    draws = np.array([[50.0, 36.0], [60.0, -35.0], [40.0, 38.0]])
+    for sign in (1, -1):
+        fit = SimpleNamespace(candidate=cand, specs=(EffectSpec.parse("root_compliance(k_root=50)"),
+                                                     EffectSpec.parse(f"probe_misalignment(angle_deg={36 * sign})")))
+        out = fold_pitch_sign(fit, draws)
+        assert out[:, 0].tolist() == [50.0, 60.0, 40.0] and out[:, 1].tolist() == [36.0 * sign, 35.0 * sign, 38.0 * sign]
+    assert draws[1, 1] == -35.0  # the caller's draws are left as they were

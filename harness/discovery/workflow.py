@@ -113,12 +113,12 @@ from ..probe.protocol import PROTOCOLS
 from . import engine_runs
 from .checks_text import lookalike_notes
 from .contacts import FieldContacts, read_contacts
-from .fit import bootstrap_ci
+from .fit import bootstrap_ci, bootstrap_draws, intervals_from_draws
 from .nulls import ci_of
 from .per_cane import PER_CANE_ALPHA, Cov2, PerCaneTest, per_cane_test, varying_parameter
 from .nulls import covers_null
 from .refine import refine
-from .tiebreak import shape_tie_break
+from .tiebreak import fold_pitch_sign, shape_tie_break
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, backward, drop_unsupported, forward_select
 from .structure import between_share
@@ -446,7 +446,9 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
         alt, cv_t, at_t, shape_tie = shape_tie_break(current, sel.close_calls, cv_cur, at, at_empty, lkf, shape_of,
                                                      lambda at_, cv_: reanchor(at_, cv_), ADEQUACY_ALPHA)
         if shape_tie is not None and shape_tie.swapped:
-            ci_t = draw_ci(cv_t.fit, at_t)
+            # the traces fixed the pitch's sign: its interval is of its size (.tiebreak.fold_pitch_sign)
+            ci_t = intervals_from_draws(cv_t.fit, fold_pitch_sign(cv_t.fit, bootstrap_draws(
+                cv_t.fit, at_t, lkf, n_boot=n_boot, seed=seed)), len(np.unique(at_t.screen.canes)))
             if covers_null(next(sp for sp in cv_t.fit.specs if sp.name == shape_tie.rival), ci_t):
                 shape_tie.swapped, shape_tie.why = False, f"the {shape_tie.rival}'s interval reaches no effect"
             else:
