@@ -171,20 +171,18 @@ def test_the_thirteenth_generators_share_of_diameter_flare_is_named(tmp_path):
     model's stiffness between canes (the thick canes needed more collar). Now the flare is named
     alone with its size exponent freed and near 1, nothing is flagged, and the out-of-sample median
     |ln| falls by more than half (0.42 -> 0.08 in session 66). About two minutes."""
-    import runpy
+    import subprocess
     import sys
+    from pathlib import Path
 
     from canebench.data.dataset import load_dataset
     from canebench.discovery.workflow import discover
     from canebench.execute.executors import make_executor
 
-    here = __import__("pathlib").Path(__file__).resolve().parents[1] / "docs" / "independent-generator-13"
-    argv = sys.argv
-    try:
-        sys.argv = ["make.py", "--only", "ds05", "--out", str(tmp_path)]
-        runpy.run_path(str(here / "make.py"), run_name="__main__")
-    finally:
-        sys.argv = argv
+    here = Path(__file__).resolve().parents[1] / "docs" / "independent-generator-13"
+    # run as a script (its folder on the path: it imports its own rod.py), writing into tmp_path
+    subprocess.run([sys.executable, str(here / "make.py"), "--only", "ds05", "--out", str(tmp_path)], check=True,
+                   capture_output=True)
     res = discover(load_dataset(tmp_path / "data" / "ds05"), confirm=False, n_boot=40,
                    executor=make_executor("serial", 1))
     assert [n["effect"] for n in res.named] == ["base_flare"] and not res.unexplained, (res.named, res.notes)
