@@ -42,10 +42,12 @@
    the rest refitted and re-anchored without it, the backward pass run, and
    the intervals drawn again; nothing takes its place, and the result is
    ``unexplained`` (the residuals leaned its way significantly).
-   Then each parameter held at its null during the selection (``Parameter.refined``: a flare's
-   ``size_exponent``, one collar for every cane or a share of each cane's diameter) is freed where
-   the selected model's likelihood ratio and held-out density ask for it (:mod:`.refine`), the
-   model re-anchored and its intervals drawn again.
+   Before the intervals, each parameter held at its null during the selection
+   (``Parameter.refined``: a flare's ``size_exponent``, one collar for every cane or a share of
+   each cane's diameter) is freed where the selected model's likelihood ratio and held-out density
+   ask for it (:mod:`.refine`); an adopted one is re-anchored and the backward pass run again.
+   After them, a modulus scale and a pitch that the BIC barely told apart (a close call) are put to
+   the traces' shape, which a pitch changes and a scale does not (:mod:`.tiebreak`).
 5. Adequacy (:func:`.adequacy.level_trend_geometry`): the held-out residual
    must not trend with the model's own stiffness level between canes beyond
    what the caliper-fit geometry's own error makes it do. A model that fails
@@ -86,7 +88,8 @@
    of sample.
 
 Where each stage lives: step 2 in :mod:`.contacts`, step 4 in :mod:`.selection` (with the no-effect values in
-:mod:`.nulls`), step 5 in :mod:`.verdict`, every engine run after the baseline's in
+:mod:`.nulls`, the refinements in :mod:`.refine`, the scale-or-pitch tie-break in :mod:`.tiebreak`),
+step 5 in :mod:`.verdict`, every engine run after the baseline's in
 :mod:`.engine_runs`, step 6 in :mod:`.per_cane`; this module wires them together and writes the outputs.
 """
 
@@ -114,14 +117,13 @@ from . import engine_runs
 from .checks_text import lookalike_notes
 from .contacts import FieldContacts, read_contacts
 from .fit import bootstrap_ci, bootstrap_draws, intervals_from_draws
-from .nulls import ci_of
+from .nulls import ci_of, covers_null
 from .per_cane import PER_CANE_ALPHA, Cov2, PerCaneTest, per_cane_test, varying_parameter
-from .nulls import covers_null
 from .refine import refine
-from .tiebreak import fold_pitch_sign, shape_tie_break
 from .screenset import Anchored, ScreenSet
 from .selection import ALPHA, CLOSE_BIC, MIN_CHANGE, backward, drop_unsupported, forward_select
 from .structure import between_share
+from .tiebreak import fold_pitch_sign, shape_tie_break
 from .verdict import ADEQUACY_ALPHA, INADEQUATE, judge
 
 BASELINES = {
