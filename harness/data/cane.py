@@ -278,42 +278,32 @@ def _check_extent(cane: CaneDescription) -> None:
     Checked on the centreline the chain is cut from (a raw polyline smoothed with
     the default Chaikin settings, which shortens it and lowers arches a little).
     """
-    from ..model.geometry import chaikin
+    from ..model.geometry import Curve, chaikin
 
-    pts = chaikin(cane.polyline) if cane.raw_polyline else cane.polyline
-    length = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
-    zmin, zmax = float(pts[:, 2].min()), float(pts[:, 2].max())
+    curve = Curve.from_points(chaikin(cane.polyline) if cane.raw_polyline else cane.polyline)
+    length = curve.length
+    zmin, zmax = float(curve.points[:, 2].min()), float(curve.points[:, 2].max())
     for i, c in enumerate(cane.calipers):
         _extent_error(cane, f"calipers[{i}]", c.where, length, zmin, zmax)
-    _warn_ambiguous_heights(cane, pts)
+    _warn_ambiguous_heights(cane, curve)
     for i, p in enumerate(cane.push_points):
         _extent_error(cane, f"push_points[{i}]", p.where, length, zmin, zmax)
         # a push at the clamp deflects nothing: every engine would fail on it, each in its own words
-        w = p.where
-        # (by height: where the first crossing, which the chain takes, lies; not the lowest point, which a
+        # (by height: where the first crossing lies, which the chain takes; not the lowest point, which a
         # drooping tip may be)
-        if (w.s is not None and w.s < 1e-3) or (w.height is not None and s_at(pts, w.height) < 1e-3):
+        w = p.where
+        s_push = w.s if w.s is not None else curve.s_at_height(w.height)
+        if s_push is not None and s_push < 1e-3:
             fld, v = ("s", w.s) if w.s is not None else ("height", w.height)
             raise InputError(cane.source, f"push_points[{i}].{fld}", f"{v:.4g} m is at the clamped base (within "
                                                                      "1 mm): a push there deflects nothing")
 
 
-def s_at(pts: np.ndarray, height: float) -> float:
-    """The first arc length along the polyline ``pts`` at which it reaches ``height`` (inf: never)."""
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
-    d = pts[:, 2] - height
-    if d[0] == 0:
-        return 0.0
-    k = np.nonzero(d[:-1] * d[1:] <= 0)[0]
-    return float(s[k[0]] + d[k[0]] / (d[k[0]] - d[k[0] + 1]) * (s[k[0] + 1] - s[k[0]])) if len(k) else math.inf
-
-
-def _warn_ambiguous_heights(cane: CaneDescription, pts: np.ndarray) -> None:
+def _warn_ambiguous_heights(cane: CaneDescription, curve: Any) -> None:
     """Warn where a height names more than one place: an arched cane reaches it on the way up and on
     the way down, and the first crossing is taken (an input review found the far limb's push 3 times
     softer, taken silently). Crossings within 5 cm of arc (a digitized wiggle) count as one place."""
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
-    z = pts[:, 2]
+    s, z = curve.s, curve.points[:, 2]
     places = [*((f"calipers[{i}]", c.where) for i, c in enumerate(cane.calipers)),
               *((f"push_points[{i}]", p.where) for i, p in enumerate(cane.push_points))]
     for fld, w in places:

@@ -88,7 +88,7 @@ def reanchor(engine: BaselineEngine, at: Anchored, cv_cur: Any, lkf: np.ndarray,
             log.append(entry)
             break
         at = Anchored(at.screen.anchored(specs), new_lka)
-        cv_cur = cross_validate(Candidate.of(tuple(sp.name for sp in specs), cv_cur.fit.candidate.refined), at, lkf)
+        cv_cur = cross_validate(Candidate.like(tuple(sp.name for sp in specs), cv_cur), at, lkf)
         # converged when the refit moves the predictions, not the parameters, by less than xtol
         # (a weakly identified parameter, e.g. a very stiff rig, can move far and change nothing)
         move = float(np.max(np.abs(at.predict(cv_cur.fit.specs) - at.log_k)))

@@ -25,14 +25,8 @@ def at_bound(v: float, bound: float) -> bool:
 
 
 def null_bound(p: Any) -> float:
-    """The search bound at which the parameter does nothing: the one equal to its null, or beyond
-    which the null lies (the high one of a spring whose null is infinitely stiff); NaN (no bound)
-    where the null lies inside, or is NaN."""
-    if at_bound(p.null, p.high) or p.null > p.high:
-        return p.high
-    if at_bound(p.null, p.low) or p.null < p.low:
-        return p.low
-    return math.nan
+    """:meth:`~canebench.model.effects.Parameter.null_bound` of ``p``."""
+    return p.null_bound()
 
 
 def bounds_reached(spec: EffectSpec) -> list[tuple[str, float, bool]]:

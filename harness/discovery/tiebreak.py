@@ -91,8 +91,7 @@ def shape_tie_break(current: tuple[str, ...], close_calls: list[dict[str, Any]],
         return current, cv_cur, at, None
     chosen, rival, gap = call
     alt = tuple(rival if c == chosen else c for c in current)
-    refined = tuple(r for r in cv_cur.fit.candidate.refined if r[0] in alt)
-    at_alt, cv_alt = reanchor(at_empty, cross_validate(Candidate.of(alt, refined), at_empty, lkf))
+    at_alt, cv_alt = reanchor(at_empty, cross_validate(Candidate.like(alt, cv_cur), at_empty, lkf))
     m_cur = (shape_of(tuple(cv_cur.fit.specs), alpha).get("level") or {}).get("mean")
     m_alt = (shape_of(tuple(cv_alt.fit.specs), alpha).get("level") or {}).get("mean")
     if m_cur is None or m_alt is None:

@@ -439,8 +439,14 @@ def discover(trials: list[Trial], baseline: str = "beam", backends: list[str] | 
             u["effect"] + ("" if u["covers_null"] else f" (with {u['dropped_with']})") for u in unsupported)
 
     # -- a close call between a modulus scale and a pitch, decided by the traces' shape (.tiebreak)
+    shapes: dict[tuple, dict[str, Any]] = {}
+
     def shape_of(specs, level):
-        return engine_runs.model_shape_check(engine, run, specs, seed, level)
+        # one engine run per model: the tie-break's chosen model is, where it stands, the one judged
+        key = (tuple(specs), level)
+        if key not in shapes:
+            shapes[key] = engine_runs.model_shape_check(engine, run, specs, seed, level)
+        return shapes[key]
 
     shape_tie = None
     if current:

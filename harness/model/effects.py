@@ -97,6 +97,19 @@ class Parameter:
     maximum: float = math.inf
     refined: bool = False
 
+    def null_bound(self) -> float:
+        """The search bound at which the parameter does nothing: the one equal to its null, or beyond
+        which the null lies (the high one of a spring whose null is infinitely stiff); NaN (no bound)
+        where the null lies inside, or is NaN."""
+        def at(b: float) -> bool:  # equal up to the optimizer's rounding (numpy's isclose, rtol 1e-6)
+            return bool(np.isclose(self.null, b, rtol=1e-6, atol=1e-9))
+
+        if at(self.high) or self.null > self.high:
+            return self.high
+        if at(self.low) or self.null < self.low:
+            return self.low
+        return math.nan
+
 
 class Effect:
     """Base class of a physical effect: every hook leaves the model unchanged.
@@ -555,9 +568,8 @@ class EffectSpec:
                     continue
                 # the end on the null's side only stands for it (a spring's stiffest bound for rigid):
                 # beyond it the effect fades, which is no implausible plant
-                below = v < par.low and not par.null <= par.low
-                above = v > par.high and not par.null >= par.high
-                if below or above:
+                side = par.null_bound()
+                if (v < par.low and side != par.low) or (v > par.high and side != par.high):
                     unit = "" if par.unit == "1" else f" {par.unit}"
                     warn_input(source, f"{self.name}{where}.{k}", f"{v:g}{unit} is outside {par.low:g} to "
                                f"{par.high:g}{unit}, the physically plausible range ({par.doc})")
